@@ -1,0 +1,191 @@
+"""Canonical tables: one declared pyarrow schema each, and their validation.
+
+Every artifact that moves between stages is one of these tables (long format, one row per
+joint where joints are involved), held in memory as a ``pandas.DataFrame`` and stored as Parquet.
+Conventions (frames, units, rotation formats) are those of ``docs/conventions.md``; units are in
+the column names.
+
+Tables:
+    detections:   2D keypoints of detected people, one row per (frame, view, det_id, joint).
+    poses3d:      3D keypoints of people in the world frame, one row per (frame, person_id, joint).
+    cameras:      one row per view: pinhole intrinsics, world-to-camera extrinsics, image size.
+    associations: person id of each detection (-1 = not a person / not associated).
+    people:       per person body-model shape (anny phenotypes) and height.
+    motions:      per person and frame body-model parameters (later stages write them).
+    metrics:      evaluation figures (dataset, sequence, method, metric, value, unit).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+__all__ = ["SCHEMAS", "TableError", "validate_table", "empty_table", "to_arrow"]
+
+
+class TableError(ValueError):
+    """A table does not match its declared schema; the message names table, column and expectation."""
+
+
+SCHEMAS: dict[str, pa.Schema] = {
+    "detections": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("frame", pa.int32()),
+            ("view", pa.int32()),
+            ("det_id", pa.int32()),
+            ("joint", pa.string()),
+            ("x_px", pa.float64()),
+            ("y_px", pa.float64()),
+            ("score", pa.float64()),
+        ]
+    ),
+    "poses3d": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("frame", pa.int32()),
+            ("person_id", pa.int32()),
+            ("joint", pa.string()),
+            ("x_m", pa.float64()),
+            ("y_m", pa.float64()),
+            ("z_m", pa.float64()),
+            ("valid", pa.bool_()),
+        ]
+    ),
+    "cameras": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("view", pa.int32()),
+            ("fx_px", pa.float64()),
+            ("fy_px", pa.float64()),
+            ("cx_px", pa.float64()),
+            ("cy_px", pa.float64()),
+            ("R_cam_from_world", pa.list_(pa.float64(), 9)),
+            ("t_cam_from_world_m", pa.list_(pa.float64(), 3)),
+            ("distortion", pa.list_(pa.float64(), 5)),
+            ("width_px", pa.int32()),
+            ("height_px", pa.int32()),
+        ]
+    ),
+    "associations": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("frame", pa.int32()),
+            ("view", pa.int32()),
+            ("det_id", pa.int32()),
+            ("person_id", pa.int32()),
+        ]
+    ),
+    "people": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("person_id", pa.int32()),
+            ("gender", pa.float64()),
+            ("age", pa.float64()),
+            ("muscle", pa.float64()),
+            ("weight", pa.float64()),
+            ("height", pa.float64()),
+            ("proportions", pa.float64()),
+            ("height_m", pa.float64()),
+        ]
+    ),
+    "motions": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("person_id", pa.int32()),
+            ("frame", pa.int32()),
+            ("bone_rotmats_local", pa.list_(pa.float64())),
+            ("root_translation_m", pa.list_(pa.float64(), 3)),
+            ("phenotypes", pa.list_(pa.float64())),
+            ("keypoints_world_m", pa.list_(pa.float64())),
+        ]
+    ),
+    "metrics": pa.schema(
+        [
+            ("dataset", pa.string()),
+            ("sequence", pa.string()),
+            ("method", pa.string()),
+            ("metric", pa.string()),
+            ("value", pa.float64()),
+            ("unit", pa.string()),
+        ]
+    ),
+}
+"""The declared schema of every canonical table, by table name."""
+
+_NON_NEGATIVE_INT = {"frame", "view", "det_id"}
+
+
+def empty_table(name: str) -> pd.DataFrame:
+    """An empty DataFrame with the columns and dtypes of table ``name``."""
+    return SCHEMAS[_known(name)].empty_table().to_pandas()
+
+
+def to_arrow(df: pd.DataFrame, name: str, *, source: str = "") -> pa.Table:
+    """Convert ``df`` to a pyarrow Table with exactly the declared schema of ``name``.
+
+    Extra columns are an error (they would be silently dropped otherwise); missing columns,
+    uncastable values and NaN in integer columns raise :class:`TableError`.
+    """
+    schema = SCHEMAS[_known(name)]
+    where = f" ({source})" if source else ""
+    missing = [f.name for f in schema if f.name not in df.columns]
+    if missing:
+        raise TableError(f"table '{name}'{where}: missing column(s) {missing}; expected columns {schema.names}")
+    extra = [c for c in df.columns if c not in schema.names]
+    if extra:
+        raise TableError(f"table '{name}'{where}: unexpected column(s) {extra}; expected columns {schema.names}")
+    arrays = []
+    for field in schema:
+        col = df[field.name]
+        try:
+            if pa.types.is_fixed_size_list(field.type) or pa.types.is_list(field.type):
+                values = [None if v is None else np.asarray(v, dtype=np.float64).ravel().tolist() for v in col]
+                arr = pa.array(values, type=field.type)
+            else:
+                arr = pa.array(col.to_numpy(), type=field.type, from_pandas=True)
+        except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, ValueError) as err:
+            raise TableError(
+                f"table '{name}'{where}: column '{field.name}' cannot be stored as {field.type}: {err}"
+            ) from None
+        if arr.null_count:
+            raise TableError(f"table '{name}'{where}: column '{field.name}' has {arr.null_count} missing value(s)")
+        arrays.append(arr)
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def validate_table(df: pd.DataFrame, name: str, *, source: str = "") -> pd.DataFrame:
+    """Check ``df`` against table ``name`` and return it with the declared dtypes.
+
+    Beyond the schema: frame/view/det_id are non-negative; coordinates and values are finite where
+    the table requires it (detections x/y/score, cameras intrinsics); scores lie in [0, 1].
+
+    Raises:
+        TableError: naming the table, the column and what was expected.
+    """
+    table = to_arrow(df, name, source=source)
+    out = table.to_pandas()
+    where = f" ({source})" if source else ""
+    for col in _NON_NEGATIVE_INT & set(out.columns):
+        if len(out) and (out[col] < 0).any():
+            raise TableError(f"table '{name}'{where}: column '{col}' must be >= 0, got {int(out[col].min())}")
+    finite_cols = {
+        "detections": ["x_px", "y_px", "score"],
+        "cameras": ["fx_px", "fy_px", "cx_px", "cy_px"],
+    }.get(name, [])
+    for col in finite_cols:
+        bad = ~np.isfinite(out[col].to_numpy())
+        if bad.any():
+            raise TableError(f"table '{name}'{where}: column '{col}' has {int(bad.sum())} non-finite value(s)")
+    if name == "detections" and len(out):
+        s = out["score"].to_numpy()
+        if (s < 0).any() or (s > 1).any():
+            raise TableError(f"table '{name}'{where}: column 'score' must lie in [0, 1]")
+    return out
+
+
+def _known(name: str) -> str:
+    if name not in SCHEMAS:
+        raise TableError(f"unknown table '{name}'; known tables are {sorted(SCHEMAS)}")
+    return name
