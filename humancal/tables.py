@@ -7,6 +7,7 @@ the column names.
 
 Tables:
     detections:   2D keypoints of detected people, one row per (frame, view, det_id, joint).
+    views:        one row per view: name and image size (what a user knows without calibration).
     poses3d:      3D keypoints of people in the world frame, one row per (frame, person_id, joint).
     cameras:      one row per view: pinhole intrinsics, world-to-camera extrinsics, image size.
     associations: person id of each detection (-1 = not a person / not associated).
@@ -39,6 +40,15 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("x_px", pa.float64()),
             ("y_px", pa.float64()),
             ("score", pa.float64()),
+        ]
+    ),
+    "views": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("view", pa.int32()),
+            ("name", pa.string()),
+            ("width_px", pa.int32()),
+            ("height_px", pa.int32()),
         ]
     ),
     "poses3d": pa.schema(
@@ -144,7 +154,10 @@ def to_arrow(df: pd.DataFrame, name: str, *, source: str = "") -> pa.Table:
                 values = [None if v is None else np.asarray(v, dtype=np.float64).ravel().tolist() for v in col]
                 arr = pa.array(values, type=field.type)
             else:
-                arr = pa.array(col.to_numpy(), type=field.type, from_pandas=True)
+                # Floats keep NaN (a coordinate may be NaN where the table allows); elsewhere a
+                # pandas missing value (None/NaN/NA) becomes a null, reported below.
+                floating = pa.types.is_floating(field.type)
+                arr = pa.array(col.to_numpy() if floating else col, type=field.type, from_pandas=not floating)
         except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, ValueError) as err:
             raise TableError(
                 f"table '{name}'{where}: column '{field.name}' cannot be stored as {field.type}: {err}"

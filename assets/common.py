@@ -1,0 +1,41 @@
+"""What every humancal asset shares: the automation condition, content data versions, table metadata."""
+
+
+import hashlib
+
+import dagster as dg
+import pandas as pd
+import pyarrow as pa
+
+from humancal.tables import to_arrow
+from resources.io_managers import TABLE_METADATA_KEY
+
+AC = dg.AutomationCondition
+
+UPDATE_CONDITION = (
+    (AC.missing() | (AC.any_deps_match(AC.data_version_changed()) | AC.code_version_changed()).since_last_handled())
+    & ~AC.any_deps_missing()
+    & ~AC.any_deps_in_progress()
+    & ~AC.in_progress()
+).with_label("missing, code changed, or upstream data changed")
+"""When ``humancal update`` (or the automation sensor) recomputes an asset partition: it was never
+materialized, its code_version changed, or an upstream asset produced different data."""
+
+
+def table_metadata(name: str) -> dict[str, str]:
+    """Asset metadata declaring that an asset holds canonical table ``name``."""
+    return {TABLE_METADATA_KEY: name}
+
+
+def table_data_version(df: pd.DataFrame, name: str) -> dg.DataVersion:
+    """Content hash of a canonical table (so identical outputs do not trigger downstream work)."""
+    table = to_arrow(df, name)
+    sink = pa.BufferOutputStream()
+    with pa.ipc.new_stream(sink, table.schema) as writer:
+        writer.write_table(table)
+    return dg.DataVersion(hashlib.sha256(sink.getvalue().to_pybytes()).hexdigest()[:16])
+
+
+def table_output(df: pd.DataFrame, name: str, output_name: str = "result", **metadata) -> dg.Output:
+    """An Output carrying a content data version and summary metadata."""
+    return dg.Output(df, output_name=output_name, data_version=table_data_version(df, name), metadata=metadata)

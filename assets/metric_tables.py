@@ -1,0 +1,39 @@
+"""Per sequence: every method's figures against the ground truth, in one metrics table."""
+
+
+import dagster as dg
+import pandas as pd
+
+from assets.common import UPDATE_CONDITION, table_metadata, table_output
+from evaluation.sequence_metrics import baseline_metrics
+from humancal.camera import cameras_from_table
+from pipelines.partitions import SEQUENCES
+from resources.datasets import DatasetsResource
+
+
+@dg.asset(
+    partitions_def=SEQUENCES,
+    group_name="sequence",
+    metadata=table_metadata("metrics"),
+    code_version="1",
+    automation_condition=UPDATE_CONDITION,
+)
+def metric_tables(
+    context: dg.AssetExecutionContext,
+    datasets: DatasetsResource,
+    gt_camera_triangulation: pd.DataFrame,
+    raw_detections: pd.DataFrame,
+    gt_cameras: pd.DataFrame,
+    gt_poses3d: pd.DataFrame,
+    gt_associations: pd.DataFrame,
+) -> dg.Output:
+    """MPJPE, PCP and reprojection error of each method (today: the gt_camera_triangulation baseline)."""
+    spec = datasets.spec(context.partition_key)
+    table = baseline_metrics(
+        spec, gt_camera_triangulation, raw_detections, gt_associations, cameras_from_table(gt_cameras), gt_poses3d
+    )
+    headline = table[~table["metric"].str.contains("/")]
+    return table_output(
+        table, "metrics", rows=len(table),
+        summary=dg.MetadataValue.md(headline.to_markdown(index=False, floatfmt=".2f")),
+    )

@@ -1,0 +1,62 @@
+"""Per sequence: the raw inputs and the ground truth, loaded or generated in one step."""
+
+
+import dagster as dg
+
+from assets.common import UPDATE_CONDITION, table_metadata, table_output
+from humancal.inputs import load_sequence_inputs
+from humancal.validation import check_cameras_valid, check_detections_plausible
+from pipelines.partitions import SEQUENCES
+from resources.body_model import BodyModelResource
+from resources.datasets import DatasetsResource
+
+# output name -> (canonical table, SequenceInputs attribute, description)
+_OUTPUTS = {
+    "raw_detections": ("detections", "detections", "2D detections in the canonical 23 keypoints, no identities."),
+    "views": ("views", "views", "Image size of every view."),
+    "gt_cameras": ("cameras", "gt_cameras", "Ground-truth cameras (evaluation only)."),
+    "gt_poses3d": ("poses3d", "gt_poses3d", "Ground-truth 3D joints in the world frame (evaluation only)."),
+    "gt_associations": ("associations", "gt_associations", "Ground-truth person id of each detection (evaluation only)."),
+    "gt_people": ("people", "gt_people", "Ground-truth body shape of each person (empty where unknown)."),
+}
+CODE_VERSION = "1"
+
+
+@dg.multi_asset(
+    outs={
+        name: dg.AssetOut(
+            description=desc,
+            metadata=table_metadata(table),
+            code_version=CODE_VERSION,
+            automation_condition=UPDATE_CONDITION,
+            is_required=False,
+        )
+        for name, (table, _, desc) in _OUTPUTS.items()
+    },
+    check_specs=[
+        dg.AssetCheckSpec("detections_plausible", asset="raw_detections", blocking=True,
+                          description="finite, inside the image (10% margin), scores in [0, 1]"),
+        dg.AssetCheckSpec("cameras_valid", asset="gt_cameras", blocking=True,
+                          description="finite positive focal, principal point inside, proper rotation"),
+    ],
+    partitions_def=SEQUENCES,
+    can_subset=True,
+    group_name="sequence",
+)
+def sequence_inputs(context: dg.AssetExecutionContext, body_model: BodyModelResource, datasets: DatasetsResource):
+    """Load (real datasets) or generate (synthetic) the inputs of one sequence."""
+    spec = datasets.spec(context.partition_key)
+    inputs = load_sequence_inputs(spec, body_model.get, datasets.root())
+    for name in sorted(context.op_execution_context.selected_output_names):
+        table, attr, _ = _OUTPUTS[name]
+        df = getattr(inputs, attr)
+        yield table_output(df, table, output_name=name, rows=len(df))
+    selected_checks = {key.name for key in context.op_execution_context.selected_asset_check_keys}
+    if "detections_plausible" in selected_checks:
+        report = check_detections_plausible(inputs.detections, inputs.views)
+        yield dg.AssetCheckResult(check_name="detections_plausible", asset_key="raw_detections",
+                                  passed=report.passed, description=report.description, metadata=report.figures)
+    if "cameras_valid" in selected_checks:
+        report = check_cameras_valid(inputs.gt_cameras)
+        yield dg.AssetCheckResult(check_name="cameras_valid", asset_key="gt_cameras",
+                                  passed=report.passed, description=report.description, metadata=report.figures)

@@ -1,0 +1,94 @@
+"""Metric functions on arrays (pure numpy; no tables, no I/O).
+
+Units: inputs in metres, 3D errors returned in millimetres, 2D errors in pixels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["joint_errors_mm", "mpjpe_mm", "pa_mpjpe_mm", "pcp_correct", "similarity_align"]
+
+
+def joint_errors_mm(pred_m: np.ndarray, gt_m: np.ndarray) -> np.ndarray:
+    """Per-joint Euclidean error.
+
+    Args:
+        pred_m, gt_m: (..., J, 3) joints in metres.
+
+    Returns:
+        (..., J) errors in millimetres (NaN where either side is NaN).
+    """
+    return 1000.0 * np.linalg.norm(np.asarray(pred_m) - np.asarray(gt_m), axis=-1)
+
+
+def mpjpe_mm(pred_m: np.ndarray, gt_m: np.ndarray, valid: np.ndarray | None = None) -> float:
+    """Mean per-joint position error over valid joints, millimetres (NaN when nothing is valid).
+
+    Args:
+        pred_m, gt_m: (N, J, 3) joints in metres.
+        valid: (N, J) mask; defaults to joints finite on both sides.
+    """
+    err = joint_errors_mm(pred_m, gt_m)
+    mask = np.isfinite(err) if valid is None else (np.asarray(valid, bool) & np.isfinite(err))
+    return float(err[mask].mean()) if mask.any() else float("nan")
+
+
+def similarity_align(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Align ``source`` to ``target`` with the least-squares similarity (scale, rotation, translation).
+
+    Args:
+        source, target: (J, 3) corresponding points (all finite, J >= 3).
+
+    Returns:
+        (J, 3) aligned source points.
+    """
+    mu_s, mu_t = source.mean(0), target.mean(0)
+    s0, t0 = source - mu_s, target - mu_t
+    U, S, Vt = np.linalg.svd(t0.T @ s0)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ D @ Vt
+    scale = np.trace(np.diag(S) @ D) / max((s0**2).sum(), 1e-12)
+    return scale * s0 @ R.T + mu_t
+
+
+def pa_mpjpe_mm(pred_m: np.ndarray, gt_m: np.ndarray, valid: np.ndarray | None = None) -> float:
+    """MPJPE after per-pose similarity (Procrustes) alignment of the prediction to the ground truth.
+
+    Args:
+        pred_m, gt_m: (N, J, 3) joints in metres.
+        valid: (N, J) mask; poses with fewer than 3 valid joints are skipped.
+
+    Returns:
+        millimetres (NaN when no pose qualifies).
+    """
+    pred_m, gt_m = np.asarray(pred_m), np.asarray(gt_m)
+    finite = np.isfinite(pred_m).all(-1) & np.isfinite(gt_m).all(-1)
+    mask = finite if valid is None else (finite & np.asarray(valid, bool))
+    errors = []
+    for p, g, m in zip(pred_m, gt_m, mask):
+        if m.sum() >= 3:
+            errors.append(joint_errors_mm(similarity_align(p[m], g[m]), g[m]))
+    return float(np.concatenate(errors).mean()) if errors else float("nan")
+
+
+def pcp_correct(pred_m: np.ndarray, gt_m: np.ndarray, limbs: list[tuple[int, int]], alpha: float = 0.5) -> np.ndarray:
+    """Percentage-of-correct-parts test per limb (the Shelf/Campus rule).
+
+    A limb (a, b) is correct when the mean of its two end-point errors is below ``alpha`` times the
+    ground-truth limb length: (|a - a_gt| + |b - b_gt|) / 2 < alpha |a_gt - b_gt|. A missing (NaN)
+    prediction is incorrect.
+
+    Args:
+        pred_m, gt_m: (N, J, 3) joints in metres.
+        limbs: L pairs of joint indices.
+        alpha: fraction of the limb length (0.5 in the standard protocol).
+
+    Returns:
+        (N, L) boolean array.
+    """
+    a, b = np.array(limbs).T
+    err = np.linalg.norm(pred_m - gt_m, axis=-1)
+    length = np.linalg.norm(gt_m[:, a] - gt_m[:, b], axis=-1)
+    ok = (err[:, a] + err[:, b]) / 2.0 < alpha * length
+    return np.where(np.isfinite(err[:, a] + err[:, b]), ok, False)

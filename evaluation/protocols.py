@@ -1,0 +1,136 @@
+"""Evaluation protocols: which joints, which limbs, how predictions meet the ground truth.
+
+The canonical protocol scores canonical-23 predictions against canonical-23 ground truth (the
+synthetic datasets). PCP uses the ten Shelf/Campus-style parts, with the two joints the canonical
+set lacks derived the same way on both sides: neck = shoulder midpoint, pelvis = hip midpoint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm, pcp_correct
+from humancal.camera import Camera
+from humancal.detections import detections_to_dense
+from humancal.geometry.triangulation import reprojection_errors_px
+from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX
+from humancal.poses import poses_to_dense
+from humancal.tables import validate_table
+
+__all__ = ["MetricRow", "metrics_table", "evaluate_canonical_poses", "evaluate_reprojection"]
+
+# Joints of the canonical PCP skeleton: the 23 canonical ones plus two derived (neck, pelvis).
+_NECK, _PELVIS = len(CANONICAL_JOINTS), len(CANONICAL_JOINTS) + 1
+_J = JOINT_INDEX
+CANONICAL_PCP_PARTS: dict[str, tuple[int, int]] = {
+    "left_upper_arm": (_J["left_shoulder"], _J["left_elbow"]),
+    "right_upper_arm": (_J["right_shoulder"], _J["right_elbow"]),
+    "left_lower_arm": (_J["left_elbow"], _J["left_wrist"]),
+    "right_lower_arm": (_J["right_elbow"], _J["right_wrist"]),
+    "left_upper_leg": (_J["left_hip"], _J["left_knee"]),
+    "right_upper_leg": (_J["right_hip"], _J["right_knee"]),
+    "left_lower_leg": (_J["left_knee"], _J["left_ankle"]),
+    "right_lower_leg": (_J["right_knee"], _J["right_ankle"]),
+    "head": (_NECK, _J["nose"]),
+    "torso": (_NECK, _PELVIS),
+}
+
+
+@dataclass(frozen=True)
+class MetricRow:
+    """One figure of a metric table."""
+
+    metric: str
+    value: float
+    unit: str
+
+
+def metrics_table(dataset: str, sequence: str, method: str, rows: list[MetricRow]) -> pd.DataFrame:
+    """The canonical ``metrics`` table for one method on one sequence."""
+    df = pd.DataFrame(
+        {
+            "dataset": dataset,
+            "sequence": sequence,
+            "method": method,
+            "metric": [r.metric for r in rows],
+            "value": [float(r.value) for r in rows],
+            "unit": [r.unit for r in rows],
+        },
+        columns=["dataset", "sequence", "method", "metric", "value", "unit"],
+    )
+    return validate_table(df, "metrics")
+
+
+def _with_neck_pelvis(X: np.ndarray) -> np.ndarray:
+    neck = 0.5 * (X[:, _J["left_shoulder"]] + X[:, _J["right_shoulder"]])
+    pelvis = 0.5 * (X[:, _J["left_hip"]] + X[:, _J["right_hip"]])
+    return np.concatenate([X, neck[:, None], pelvis[:, None]], axis=1)
+
+
+def evaluate_canonical_poses(pred: pd.DataFrame, gt: pd.DataFrame) -> list[MetricRow]:
+    """Score canonical-23 ``poses3d`` predictions against canonical-23 ground truth.
+
+    Predictions meet the ground truth by (frame, person_id). A ground-truth pose without a
+    prediction counts as wrong for PCP and lowers ``coverage``; MPJPE and PA-MPJPE average over
+    joints valid on both sides.
+
+    Returns:
+        rows ``mpjpe_mm``, ``pa_mpjpe_mm``, ``pcp_avg`` (percent, over ground-truth poses and the
+        ten parts), ``pcp_<part>`` per part, ``coverage`` (percent of ground-truth joints predicted).
+    """
+    g = poses_to_dense(gt, CANONICAL_JOINTS)
+    p = poses_to_dense(pred, CANONICAL_JOINTS)
+    pred_index = {(f, i): n for n, (f, i) in enumerate(zip(p.frame, p.person_id))}
+    rows = np.array([pred_index.get((f, i), -1) for f, i in zip(g.frame, g.person_id)], dtype=np.int64)
+    X_pred = np.full_like(g.joints_world_m, np.nan)
+    has = rows >= 0
+    X_pred[has] = p.joints_world_m[rows[has]]
+    both = g.valid & np.isfinite(X_pred).all(-1)
+
+    parts = list(CANONICAL_PCP_PARTS)
+    correct = pcp_correct(_with_neck_pelvis(X_pred), _with_neck_pelvis(g.joints_world_m), list(CANONICAL_PCP_PARTS.values()))
+    out = [
+        MetricRow("mpjpe_mm", mpjpe_mm(X_pred, g.joints_world_m, both), "mm"),
+        MetricRow("pa_mpjpe_mm", pa_mpjpe_mm(X_pred, g.joints_world_m, both), "mm"),
+        MetricRow("pcp_avg", 100.0 * correct.mean() if correct.size else float("nan"), "%"),
+    ]
+    out += [MetricRow(f"pcp_{name}", 100.0 * correct[:, k].mean() if len(correct) else float("nan"), "%") for k, name in enumerate(parts)]
+    out.append(MetricRow("coverage", 100.0 * both.sum() / max(g.valid.sum(), 1), "%"))
+    return out
+
+
+def evaluate_reprojection(
+    poses: pd.DataFrame, detections: pd.DataFrame, associations: pd.DataFrame, cameras: list[Camera]
+) -> list[MetricRow]:
+    """2D reprojection error of canonical 3D poses against the detections assigned to each person.
+
+    Returns:
+        ``reprojection_error_px`` (mean over all observed joints), ``reprojection_error_median_px``,
+        and ``reprojection_error_px/<joint>`` per canonical joint.
+    """
+    dense = detections_to_dense(detections)
+    p = poses_to_dense(poses, CANONICAL_JOINTS)
+    ids = associations.set_index(["frame", "view", "det_id"])["person_id"]
+    person = ids.reindex(pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])).fillna(-1).to_numpy(np.int64)
+    pose_row = {(f, i): n for n, (f, i) in enumerate(zip(p.frame, p.person_id))}
+    match = np.array([pose_row.get((f, i), -1) for f, i in zip(dense.frame, person)], dtype=np.int64)
+    errors = np.full(dense.scores.shape, np.nan)
+    for v, cam in enumerate(cameras):
+        sel = (dense.view == v) & (match >= 0) & (person >= 0)
+        if sel.any():
+            X = p.joints_world_m[match[sel]]  # (n, J, 3)
+            e = reprojection_errors_px([cam], X.reshape(-1, 3), dense.keypoints_px[sel].reshape(1, -1, 2))
+            errors[sel] = e.reshape(X.shape[:2])
+    errors[~dense.valid] = np.nan
+    finite = np.isfinite(errors)
+    out = [
+        MetricRow("reprojection_error_px", float(errors[finite].mean()) if finite.any() else float("nan"), "px"),
+        MetricRow("reprojection_error_median_px", float(np.median(errors[finite])) if finite.any() else float("nan"), "px"),
+    ]
+    for j, name in enumerate(CANONICAL_JOINTS):
+        col = errors[:, j][np.isfinite(errors[:, j])]
+        out.append(MetricRow(f"reprojection_error_px/{name}", float(col.mean()) if len(col) else float("nan"), "px"))
+    return out

@@ -1,0 +1,184 @@
+"""``humancal``: the command-line interface (the stable entry point for users and scripts).
+
+    humancal demo                        materialize every per-sequence asset of synthetic__demo, print its metrics
+    humancal update [--partition P ...]  materialize only what is missing or stale
+    humancal report [--partition P] [--format md|csv]
+    humancal ui                          the Dagster UI on 127.0.0.1
+
+All commands share one persistent Dagster instance in ``<state dir>/dagster_home`` (telemetry off),
+so materializations and lineage survive between commands and are visible in the UI.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+DEMO_PARTITION = "synthetic__demo"
+QUIET_RUN_CONFIG = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
+
+
+def dagster_home() -> Path:
+    """The persistent DAGSTER_HOME of this checkout (created with telemetry disabled)."""
+    from humancal.settings import state_dir
+
+    home = state_dir() / "dagster_home"
+    home.mkdir(parents=True, exist_ok=True)
+    config = home / "dagster.yaml"
+    if not config.exists():
+        config.write_text("telemetry:\n  enabled: false\n")
+    return home
+
+
+def _instance():
+    os.environ["DAGSTER_HOME"] = str(dagster_home())
+    import dagster as dg
+
+    return dg.DagsterInstance.get()
+
+
+def register_partitions(instance, defs) -> list[str]:
+    """Add every loadable sequence of the datasets config as a partition; returns all keys."""
+    from pipelines.partitions import SEQUENCES
+
+    keys = [spec.key for spec in defs.resources["datasets"].available()]
+    existing = set(instance.get_dynamic_partitions(SEQUENCES.name))
+    new = [k for k in keys if k not in existing]
+    if new:
+        instance.add_dynamic_partitions(SEQUENCES.name, new)
+    return keys
+
+
+def _check_partitions(requested: list[str] | None, defs) -> None:
+    if not requested:
+        return
+    datasets = defs.resources["datasets"]
+    available = {s.key for s in datasets.available()}
+    for key in requested:
+        spec = datasets.spec(key)  # raises for unknown dataset / sequence
+        if spec.key not in available:
+            raise SystemExit(
+                f"humancal: partition {key} needs {spec.data_folder}/ under the data root (set HUMANCAL_DATA_DIR)"
+            )
+
+
+def _print_metrics(table, fmt: str) -> None:
+    if fmt == "csv":
+        sys.stdout.write(table.to_csv(index=False))
+    else:
+        sys.stdout.write(table.to_markdown(index=False, floatfmt=".2f") + "\n")
+
+
+def _stored_metrics(partitions: list[str] | None, headline_only: bool):
+    import pandas as pd
+
+    from humancal.settings import state_dir
+
+    root = state_dir() / "artifacts" / "metric_tables"
+    files = sorted(root.glob("*.parquet")) if root.is_dir() else []
+    if partitions:
+        files = [root / f"{p}.parquet" for p in partitions]
+        missing = [str(f) for f in files if not f.exists()]
+        if missing:
+            raise SystemExit(f"humancal: no metric table stored for {missing}; run `humancal update --partition ...` first")
+    if not files:
+        raise SystemExit("humancal: no metric tables stored yet; run `humancal demo` or `humancal update` first")
+    table = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
+    if headline_only:
+        table = table[~table["metric"].str.contains("/", regex=False)]
+    return table
+
+
+def cmd_demo(args) -> int:
+    import dagster as dg
+
+    from pipelines.definitions import defs
+
+    instance = _instance()
+    register_partitions(instance, defs)
+    print(f"humancal demo: materializing the per-sequence graph for {DEMO_PARTITION} ...", flush=True)
+    t0 = time.perf_counter()
+    keys = [k for k in defs.resolve_asset_graph().materializable_asset_keys
+            if defs.resolve_asset_graph().get(k).partitions_def is not None]
+    result = dg.materialize(
+        assets=list(defs.assets), resources=defs.resources, selection=dg.AssetSelection.assets(*keys),
+        partition_key=DEMO_PARTITION, instance=instance, run_config=QUIET_RUN_CONFIG,
+    )
+    if not result.success:
+        return 1
+    print(f"materialized {len(keys)} asset partitions in {time.perf_counter() - t0:.1f} s\n", flush=True)
+    _print_metrics(_stored_metrics([DEMO_PARTITION], headline_only=True), "md")
+    return 0
+
+
+def cmd_update(args) -> int:
+    from pipelines.definitions import defs
+    from pipelines.update import update
+
+    instance = _instance()
+    register_partitions(instance, defs)
+    _check_partitions(args.partition, defs)
+
+    def on_round(n, items):
+        names = ", ".join(f"{k.to_user_string()}[{p}]" if p else k.to_user_string() for k, p in items)
+        print(f"round {n}: {len(items)} stale or missing: {names}", flush=True)
+
+    result = update(defs, instance, partitions=args.partition or None, on_round=on_round, run_config=QUIET_RUN_CONFIG)
+    print(f"materialized {result.count} asset partitions")
+    return 0
+
+
+def cmd_report(args) -> int:
+    _print_metrics(_stored_metrics(args.partition, headline_only=not args.all), args.format)
+    return 0
+
+
+def cmd_ui(args) -> int:
+    home = dagster_home()
+    env = dict(os.environ, DAGSTER_HOME=str(home))
+    repo = Path(__file__).resolve().parent.parent
+    argv = ["dagster", "dev", "-m", "pipelines.definitions", "-h", "127.0.0.1", "-p", str(args.port)]
+    # A process started in the background by a non-interactive shell inherits SIGINT as ignored, and
+    # dagster maps SIGTERM onto its SIGINT handler: restore the defaults so Ctrl-C and `kill` stop it.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    os.chdir(repo)
+    os.execvpe(argv[0], argv, env)
+    return 0  # not reached
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="humancal", description="Cameras and body meshes from people in multi-view video.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    sub.add_parser("demo", help=f"materialize the whole graph for {DEMO_PARTITION} and print its metrics").set_defaults(func=cmd_demo)
+    p = sub.add_parser("update", help="materialize only missing or stale asset partitions")
+    p.add_argument("--partition", action="append", help="restrict to this partition (repeatable), e.g. synthetic__demo")
+    p.set_defaults(func=cmd_update)
+    p = sub.add_parser("report", help="print stored metric tables")
+    p.add_argument("--partition", action="append", help="only this partition (repeatable)")
+    p.add_argument("--format", choices=("md", "csv"), default="md")
+    p.add_argument("--all", action="store_true", help="include per-joint / per-view rows")
+    p.set_defaults(func=cmd_report)
+    p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
+    p.add_argument("--port", type=int, default=3000)
+    p.set_defaults(func=cmd_ui)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", datefmt="%H:%M:%S")
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError) as err:
+        print(f"humancal: error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,41 @@
+"""The one Definitions object of humancal (``dagster dev`` / ``dagster asset materialize`` load it)."""
+
+from __future__ import annotations
+
+import dagster as dg
+
+from assets.baselines import gt_camera_triangulation
+from assets.metric_tables import metric_tables
+from assets.registry import sequence_registry
+from assets.sequence_inputs import sequence_inputs
+from humancal.settings import state_dir
+from resources.body_model import BodyModelResource
+from resources.datasets import DatasetsResource
+from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFactory
+
+PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, metric_tables]
+"""Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
+
+SHARED_ASSETS = [sequence_registry]
+"""Unpartitioned assets."""
+
+
+def build_definitions(storage_root: str | None = None) -> dg.Definitions:
+    """Definitions with artifacts under ``storage_root`` (default: ``<state dir>/artifacts``)."""
+    root = storage_root or str(state_dir() / "artifacts")
+    return dg.Definitions(
+        assets=[*SHARED_ASSETS, *PER_SEQUENCE_ASSETS],
+        jobs=[
+            dg.define_asset_job("sequence_job", selection=dg.AssetSelection.groups("sequence"),
+                                description="Every per-sequence asset of one partition."),
+        ],
+        resources={
+            "io_manager": ParquetIOManagerFactory(base_path=root),
+            "checkpoint_io_manager": CheckpointIOManagerFactory(base_path=root),
+            "body_model": BodyModelResource(),
+            "datasets": DatasetsResource(),
+        },
+    )
+
+
+defs = build_definitions()

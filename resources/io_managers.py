@@ -1,0 +1,162 @@
+"""IO managers: canonical tables to Parquet, torch state to checkpoint files.
+
+Layout under the storage root (local path or any fsspec URL: ``s3://``, ``gs://`` with the matching
+fsspec package installed)::
+
+    <root>/<asset key path>/<partition key>.parquet     partitioned tables
+    <root>/<asset key path>.parquet                     unpartitioned tables
+    <root>/<asset key path>.pt                          checkpoints
+
+Writes are atomic: the bytes go to a hidden temporary sibling first, which is renamed over the
+target only when complete, so a killed run never leaves a half-written artifact under the real name.
+"""
+
+from __future__ import annotations
+
+import io
+import uuid
+from typing import Any
+
+import dagster as dg
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import torch
+from dagster._core.storage.upath_io_manager import UPathIOManager
+from upath import UPath
+
+from humancal.tables import SCHEMAS, to_arrow
+
+TABLE_METADATA_KEY = "humancal/table"
+"""Asset metadata naming the canonical table an asset holds (validated on every write)."""
+
+
+class ArtifactError(RuntimeError):
+    """A stored artifact cannot be written or read; the message names the file and what to do."""
+
+
+def partition_path(root: str | UPath, asset_key: str, partition_key: str | None, extension: str = ".parquet") -> UPath:
+    """Where an asset (partition) lives under ``root``: the one place this layout is defined."""
+    base = UPath(root).joinpath(*asset_key.split("/"))
+    return UPath(f"{base}/{partition_key}{extension}") if partition_key else UPath(f"{base}{extension}")
+
+
+def _atomic_write(path: UPath, payload: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
+    try:
+        with tmp.open("wb") as f:
+            f.write(payload)
+        tmp.rename(path)
+    except OSError as err:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise ArtifactError(f"cannot write {path}: {err.strerror or err} (check the storage root and its permissions)") from None
+
+
+def _make_dir(path: UPath) -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ArtifactError(
+            f"cannot create {path}: {err.strerror or err} (the storage root must be writable; "
+            "set HUMANCAL_STATE_DIR or the io manager's base_path)"
+        ) from None
+
+
+class _AtomicUPathIOManager(UPathIOManager):
+    def make_directory(self, path: UPath) -> None:
+        _make_dir(path)
+
+
+class ParquetTableIOManager(_AtomicUPathIOManager):
+    """Stores pandas DataFrames as Parquet; validates canonical tables against their schema."""
+
+    extension = ".parquet"
+
+    def dump_to_path(self, context: dg.OutputContext, obj: pd.DataFrame, path: UPath) -> None:
+        if not isinstance(obj, pd.DataFrame):
+            raise TypeError(f"{context.asset_key.to_user_string()}: expected a pandas DataFrame, got {type(obj).__name__}")
+        name = (context.definition_metadata or {}).get(TABLE_METADATA_KEY)
+        if name is not None:
+            table = to_arrow(obj, name, source=context.asset_key.to_user_string())
+        else:
+            table = pa.Table.from_pandas(obj, preserve_index=False)
+        buffer = io.BytesIO()
+        pq.write_table(table, buffer)
+        _atomic_write(path, buffer.getvalue())
+
+    def load_from_path(self, context: dg.InputContext, path: UPath) -> pd.DataFrame:
+        try:
+            with path.open("rb") as f:
+                table = pq.read_table(f)
+        except FileNotFoundError:
+            raise ArtifactError(f"{path} does not exist: materialize {context.asset_key.to_user_string()} first") from None
+        except (pa.ArrowInvalid, OSError) as err:
+            raise ArtifactError(
+                f"{path} is not a readable Parquet file ({err}); delete it and materialize "
+                f"{context.asset_key.to_user_string()} again"
+            ) from None
+        name = (context.upstream_output.definition_metadata or {}).get(TABLE_METADATA_KEY) if context.upstream_output else None
+        if name is not None and not table.schema.equals(SCHEMAS[name]):
+            raise ArtifactError(f"{path}: stored schema differs from the declared '{name}' table; rematerialize it")
+        return table.to_pandas()
+
+    def get_metadata(self, context: dg.OutputContext, obj: pd.DataFrame) -> dict[str, Any]:
+        return {"rows": dg.MetadataValue.int(len(obj)), "columns": dg.MetadataValue.text(", ".join(map(str, obj.columns)))}
+
+
+class CheckpointIOManager(_AtomicUPathIOManager):
+    """Stores torch checkpoints (a dict of tensors and plain values); loads with ``weights_only=True``."""
+
+    extension = ".pt"
+
+    def dump_to_path(self, context: dg.OutputContext, obj: dict, path: UPath) -> None:
+        if not isinstance(obj, dict):
+            raise TypeError(f"{context.asset_key.to_user_string()}: expected a checkpoint dict, got {type(obj).__name__}")
+        buffer = io.BytesIO()
+        torch.save(obj, buffer)
+        _atomic_write(path, buffer.getvalue())
+
+    def load_from_path(self, context: dg.InputContext, path: UPath) -> dict:
+        try:
+            with path.open("rb") as f:
+                return torch.load(io.BytesIO(f.read()), weights_only=True, map_location="cpu")
+        except FileNotFoundError:
+            raise ArtifactError(f"{path} does not exist: materialize {context.asset_key.to_user_string()} first") from None
+        except (RuntimeError, EOFError, ValueError) as err:
+            raise ArtifactError(f"{path} is not a readable checkpoint ({err}); delete it and materialize again") from None
+
+    def get_metadata(self, context: dg.OutputContext, obj: dict) -> dict[str, Any]:
+        n = sum(v.numel() for v in _tensors(obj))
+        return {"parameters": dg.MetadataValue.int(n)}
+
+
+def _tensors(obj: Any):
+    if isinstance(obj, torch.Tensor):
+        yield obj
+    elif isinstance(obj, dict):
+        for v in obj.values():
+            yield from _tensors(v)
+    elif isinstance(obj, (list, tuple)):
+        for v in obj:
+            yield from _tensors(v)
+
+
+class ParquetIOManagerFactory(dg.ConfigurableIOManagerFactory):
+    """Parquet tables under ``base_path`` (a local folder or an fsspec URL)."""
+
+    base_path: str
+
+    def create_io_manager(self, context) -> ParquetTableIOManager:
+        return ParquetTableIOManager(base_path=UPath(self.base_path))
+
+
+class CheckpointIOManagerFactory(dg.ConfigurableIOManagerFactory):
+    """Torch checkpoints under ``base_path`` (a local folder or an fsspec URL)."""
+
+    base_path: str
+
+    def create_io_manager(self, context) -> CheckpointIOManager:
+        return CheckpointIOManager(base_path=UPath(self.base_path))

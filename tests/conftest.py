@@ -1,0 +1,16 @@
+"""Shared fixtures: the body model is built once per test session (anny's cache lives in the state dir)."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+os.environ.setdefault("ANNY_CACHE_DIR", str(REPO / ".humancal" / "cache" / "anny"))
+
+
+@pytest.fixture(scope="session")
+def body_model():
+    from humancal.body import BodyModel
+
+    return BodyModel()

@@ -1,0 +1,48 @@
+import numpy as np
+import pandas as pd
+import pytest
+
+from humancal.tables import SCHEMAS, TableError, empty_table, to_arrow, validate_table
+
+
+def _detections(**overrides):
+    data = {
+        "sequence": ["s", "s"], "frame": [0, 1], "view": [0, 0], "det_id": [0, 0],
+        "joint": ["nose", "left_eye"], "x_px": [10.0, 11.0], "y_px": [5.0, 6.0], "score": [0.9, 0.5],
+    }
+    data.update(overrides)
+    return pd.DataFrame(data)
+
+
+def test_every_schema_roundtrips_an_empty_table():
+    for name, schema in SCHEMAS.items():
+        assert to_arrow(empty_table(name), name).schema.equals(schema)
+
+
+def test_valid_detections_pass_and_keep_declared_dtypes():
+    out = validate_table(_detections(), "detections")
+    assert out["frame"].dtype == np.int32 and out["x_px"].dtype == np.float64
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"x_px": [np.nan, 1.0]}, "column 'x_px' has 1 non-finite"),
+        ({"score": [1.5, 0.2]}, "'score' must lie in [0, 1]"),
+        ({"frame": [-1, 0]}, "column 'frame' must be >= 0"),
+        ({"joint": [None, "nose"]}, "column 'joint' has 1 missing"),
+        ({"frame": ["a", "b"]}, "column 'frame' cannot be stored as int32"),
+    ],
+)
+def test_bad_values_name_table_and_column(overrides, message):
+    with pytest.raises(TableError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        validate_table(_detections(**overrides), "detections", source="unit-test")
+
+
+def test_missing_and_extra_columns_are_errors():
+    with pytest.raises(TableError, match=r"missing column\(s\) \['score'\]"):
+        validate_table(_detections().drop(columns="score"), "detections")
+    with pytest.raises(TableError, match=r"unexpected column\(s\) \['extra'\]"):
+        validate_table(_detections().assign(extra=1), "detections")
+    with pytest.raises(TableError, match="unknown table"):
+        validate_table(_detections(), "detectionz")
