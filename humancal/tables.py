@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-__all__ = ["SCHEMAS", "TableError", "validate_table", "empty_table", "to_arrow"]
+__all__ = ["SCHEMAS", "TableError", "validate_table", "check_values", "empty_table", "to_arrow"]
 
 
 class TableError(ValueError):
@@ -171,31 +171,41 @@ def to_arrow(df: pd.DataFrame, name: str, *, source: str = "") -> pa.Table:
 def validate_table(df: pd.DataFrame, name: str, *, source: str = "") -> pd.DataFrame:
     """Check ``df`` against table ``name`` and return it with the declared dtypes.
 
-    Beyond the schema: frame/view/det_id are non-negative; coordinates and values are finite where
-    the table requires it (detections x/y/score, cameras intrinsics); scores lie in [0, 1].
+    Beyond the schema (see :func:`check_values`): identifiers non-negative, required values finite,
+    scores in [0, 1].
 
     Raises:
         TableError: naming the table, the column and what was expected.
     """
     table = to_arrow(df, name, source=source)
-    out = table.to_pandas()
+    check_values(table, name, source=source)
+    return table.to_pandas()
+
+
+def check_values(table: pa.Table, name: str, *, source: str = "") -> None:
+    """Value rules the schema cannot express: frame/view/det_id >= 0; detections x/y/score and camera
+    intrinsics finite; detection scores in [0, 1].
+
+    Raises:
+        TableError: naming the table, the column and what was expected.
+    """
     where = f" ({source})" if source else ""
-    for col in _NON_NEGATIVE_INT & set(out.columns):
-        if len(out) and (out[col] < 0).any():
-            raise TableError(f"table '{name}'{where}: column '{col}' must be >= 0, got {int(out[col].min())}")
+    for col in sorted(_NON_NEGATIVE_INT & set(table.column_names)):
+        values = table.column(col).to_numpy()
+        if len(values) and (values < 0).any():
+            raise TableError(f"table '{name}'{where}: column '{col}' must be >= 0, got {int(values.min())}")
     finite_cols = {
         "detections": ["x_px", "y_px", "score"],
         "cameras": ["fx_px", "fy_px", "cx_px", "cy_px"],
     }.get(name, [])
     for col in finite_cols:
-        bad = ~np.isfinite(out[col].to_numpy())
+        bad = ~np.isfinite(table.column(col).to_numpy())
         if bad.any():
             raise TableError(f"table '{name}'{where}: column '{col}' has {int(bad.sum())} non-finite value(s)")
-    if name == "detections" and len(out):
-        s = out["score"].to_numpy()
+    if name == "detections" and table.num_rows:
+        s = table.column("score").to_numpy()
         if (s < 0).any() or (s > 1).any():
             raise TableError(f"table '{name}'{where}: column 'score' must lie in [0, 1]")
-    return out
 
 
 def _known(name: str) -> str:

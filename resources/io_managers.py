@@ -25,7 +25,7 @@ import torch
 from dagster._core.storage.upath_io_manager import UPathIOManager
 from upath import UPath
 
-from humancal.tables import SCHEMAS, to_arrow
+from humancal.tables import SCHEMAS, check_values, to_arrow
 
 TABLE_METADATA_KEY = "humancal/table"
 """Asset metadata naming the canonical table an asset holds (validated on every write)."""
@@ -41,11 +41,22 @@ def partition_path(root: str | UPath, asset_key: str, partition_key: str | None,
     return UPath(f"{base}/{partition_key}{extension}") if partition_key else UPath(f"{base}{extension}")
 
 
+def _write_chunks(f, payload: bytes, chunk_bytes: int = 1 << 22) -> None:
+    for start in range(0, len(payload), chunk_bytes):
+        f.write(payload[start : start + chunk_bytes])
+
+
 def _atomic_write(path: UPath, payload: bytes) -> None:
+    """Write ``payload`` to a hidden temporary sibling, then rename it over ``path``.
+
+    Leftover temporaries of an earlier killed write of the same artifact are removed first.
+    """
+    for stale in path.parent.glob(f".{path.name}.tmp-*") if path.parent.exists() else ():
+        stale.unlink(missing_ok=True)
     tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
     try:
         with tmp.open("wb") as f:
-            f.write(payload)
+            _write_chunks(f, payload)
         tmp.rename(path)
     except OSError as err:
         try:
@@ -81,6 +92,7 @@ class ParquetTableIOManager(_AtomicUPathIOManager):
         name = (context.definition_metadata or {}).get(TABLE_METADATA_KEY)
         if name is not None:
             table = to_arrow(obj, name, source=context.asset_key.to_user_string())
+            check_values(table, name, source=context.asset_key.to_user_string())
         else:
             table = pa.Table.from_pandas(obj, preserve_index=False)
         buffer = io.BytesIO()
@@ -125,8 +137,9 @@ class CheckpointIOManager(_AtomicUPathIOManager):
                 return torch.load(io.BytesIO(f.read()), weights_only=True, map_location="cpu")
         except FileNotFoundError:
             raise ArtifactError(f"{path} does not exist: materialize {context.asset_key.to_user_string()} first") from None
-        except (RuntimeError, EOFError, ValueError) as err:
-            raise ArtifactError(f"{path} is not a readable checkpoint ({err}); delete it and materialize again") from None
+        except Exception as err:  # torch raises several unrelated types for a damaged file
+            first_line = str(err).splitlines()[0] if str(err) else type(err).__name__
+            raise ArtifactError(f"{path} is not a readable checkpoint ({first_line}); delete it and materialize again") from None
 
     def get_metadata(self, context: dg.OutputContext, obj: dict) -> dict[str, Any]:
         n = sum(v.numel() for v in _tensors(obj))
