@@ -2,6 +2,7 @@
 
 
 import hashlib
+import warnings
 
 import dagster as dg
 import pandas as pd
@@ -38,4 +39,7 @@ def table_data_version(df: pd.DataFrame, name: str) -> dg.DataVersion:
 
 def table_output(df: pd.DataFrame, name: str, output_name: str = "result", **metadata) -> dg.Output:
     """An Output carrying a content data version and summary metadata."""
-    return dg.Output(df, output_name=output_name, data_version=table_data_version(df, name), metadata=metadata)
+    with warnings.catch_warnings():
+        # Output(data_version=...) is marked beta; the pinned dagster version is what we test against.
+        warnings.simplefilter("ignore", dg.BetaWarning)
+        return dg.Output(df, output_name=output_name, data_version=table_data_version(df, name), metadata=metadata)

@@ -47,11 +47,11 @@ def sequence_inputs(context: dg.AssetExecutionContext, body_model: BodyModelReso
     """Load (real datasets) or generate (synthetic) the inputs of one sequence."""
     spec = datasets.spec(context.partition_key)
     inputs = load_sequence_inputs(spec, body_model.get, datasets.root())
-    for name in sorted(context.op_execution_context.selected_output_names):
+    for name in sorted(key.path[-1] for key in context.selected_asset_keys):
         table, attr, _ = _OUTPUTS[name]
         df = getattr(inputs, attr)
         yield table_output(df, table, output_name=name, rows=len(df))
-    selected_checks = {key.name for key in context.op_execution_context.selected_asset_check_keys}
+    selected_checks = {key.name for key in context.selected_asset_check_keys}
     if "detections_plausible" in selected_checks:
         report = check_detections_plausible(inputs.detections, inputs.views)
         yield dg.AssetCheckResult(check_name="detections_plausible", asset_key="raw_detections",

@@ -76,19 +76,22 @@ def _print_metrics(table, fmt: str) -> None:
 
 def _stored_metrics(partitions: list[str] | None, headline_only: bool):
     import pandas as pd
+    from upath import UPath
 
-    from humancal.settings import state_dir
+    from pipelines.definitions import artifacts_root
+    from resources.io_managers import partition_path
 
-    root = state_dir() / "artifacts" / "metric_tables"
-    files = sorted(root.glob("*.parquet")) if root.is_dir() else []
     if partitions:
-        files = [root / f"{p}.parquet" for p in partitions]
+        files = [partition_path(artifacts_root(), "metric_tables", p) for p in partitions]
         missing = [str(f) for f in files if not f.exists()]
         if missing:
             raise SystemExit(f"humancal: no metric table stored for {missing}; run `humancal update --partition ...` first")
+    else:
+        folder = UPath(artifacts_root()) / "metric_tables"
+        files = sorted(folder.glob("*.parquet")) if folder.exists() else []
     if not files:
         raise SystemExit("humancal: no metric tables stored yet; run `humancal demo` or `humancal update` first")
-    table = pd.concat([pd.read_parquet(f) for f in files], ignore_index=True)
+    table = pd.concat([pd.read_parquet(str(f)) for f in files], ignore_index=True)
     if headline_only:
         table = table[~table["metric"].str.contains("/", regex=False)]
     return table
@@ -173,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", datefmt="%H:%M:%S")
+    logging.getLogger("alembic").setLevel(logging.WARNING)  # Dagster's storage migrations
     try:
         return args.func(args)
     except (ValueError, FileNotFoundError) as err:

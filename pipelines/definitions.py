@@ -20,9 +20,14 @@ SHARED_ASSETS = [sequence_registry]
 """Unpartitioned assets."""
 
 
+def artifacts_root() -> str:
+    """Default storage root of every artifact: ``<state dir>/artifacts``."""
+    return str(state_dir() / "artifacts")
+
+
 def build_definitions(storage_root: str | None = None) -> dg.Definitions:
-    """Definitions with artifacts under ``storage_root`` (default: ``<state dir>/artifacts``)."""
-    root = storage_root or str(state_dir() / "artifacts")
+    """Definitions with artifacts under ``storage_root`` (default: :func:`artifacts_root`)."""
+    root = storage_root or artifacts_root()
     return dg.Definitions(
         assets=[*SHARED_ASSETS, *PER_SEQUENCE_ASSETS],
         jobs=[
