@@ -1,0 +1,82 @@
+"""The `humancal` CLI: argument handling, reports, and the UI's signal handling."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from pipelines.cli import build_parser, main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_parser_knows_the_four_commands():
+    parser = build_parser()
+    assert parser.parse_args(["update", "--partition", "a__b", "--partition", "c__d"]).partition == ["a__b", "c__d"]
+    assert parser.parse_args(["report", "--format", "csv"]).format == "csv"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["report", "--format", "xml"])
+
+
+def test_report_prints_stored_tables_as_csv(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    folder = tmp_path / "artifacts" / "metric_tables"
+    folder.mkdir(parents=True)
+    pd.DataFrame({"dataset": ["d"], "sequence": ["s"], "method": ["m"], "metric": ["mpjpe_mm"], "value": [12.5], "unit": ["mm"]}
+                 ).to_parquet(folder / "d__s.parquet")
+    assert main(["report", "--partition", "d__s", "--format", "csv"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "dataset,sequence,method,metric,value,unit" and out[1] == "d,s,m,mpjpe_mm,12.5,mm"
+    with pytest.raises(SystemExit, match="no metric table stored"):
+        main(["report", "--partition", "x__y"])
+
+
+def test_update_rejects_unknown_partition(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    assert main(["update", "--partition", "mars__base"]) == 2
+    assert "unknown dataset 'mars'" in capsys.readouterr().err
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_ui_starts_and_stops_on_sigterm(tmp_path):
+    port = _free_port()
+    env = dict(os.environ, HUMANCAL_STATE_DIR=str(tmp_path))
+    # Started the way CI starts background jobs: SIGINT ignored, no terminal.
+    proc = subprocess.Popen([sys.executable, "-m", "pipelines.cli", "ui", "--port", str(port)], cwd=REPO, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        deadline = time.time() + 120
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/server_info", timeout=2) as r:
+                    assert r.status == 200
+                    break
+            except OSError:
+                assert proc.poll() is None and time.time() < deadline, "dagster dev did not come up"
+                time.sleep(1)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=30)
+        deadline = time.time() + 20
+        while True:
+            leftovers = subprocess.run(["pgrep", "-g", str(proc.pid)], capture_output=True, text=True).stdout.split()
+            if not leftovers or time.time() > deadline:
+                break
+            time.sleep(0.5)
+        assert not leftovers, f"processes still running 20 s after SIGTERM: {leftovers}"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
