@@ -15,12 +15,13 @@ import pandas as pd
 from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm, pcp_correct
 from humancal.camera import Camera
 from humancal.detections import detections_to_dense
+from humancal.formats import SKELETONS, from_canonical
 from humancal.geometry.triangulation import reprojection_errors_px
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX
 from humancal.poses import poses_to_dense
 from humancal.tables import validate_table
 
-__all__ = ["MetricRow", "metrics_table", "evaluate_canonical_poses", "evaluate_reprojection"]
+__all__ = ["MetricRow", "metrics_table", "evaluate_canonical_poses", "evaluate_reprojection", "evaluate_shelf_poses"]
 
 # Joints of the canonical PCP skeleton: the 23 canonical ones plus two derived (neck, pelvis).
 _NECK, _PELVIS = len(CANONICAL_JOINTS), len(CANONICAL_JOINTS) + 1
@@ -133,4 +134,56 @@ def evaluate_reprojection(
     for j, name in enumerate(CANONICAL_JOINTS):
         col = errors[:, j][np.isfinite(errors[:, j])]
         out.append(MetricRow(f"reprojection_error_px/{name}", float(col.mean()) if len(col) else float("nan"), "px"))
+    return out
+
+
+# The Shelf/Campus protocol: the first 14 SHELF15 joints, the ten standard parts (pairs of those joints),
+# actors 1-3 = ground-truth ids 0, 1, 2, head joints of the prediction derived by the mvpose rule
+# (humancal.formats.skeletons), every annotated actor-frame scored (a missing prediction is wrong).
+SHELF_PCP_PARTS: dict[str, tuple[int, int]] = {
+    "left_upper_arm": (9, 10),
+    "right_upper_arm": (8, 7),
+    "left_lower_arm": (10, 11),
+    "right_lower_arm": (7, 6),
+    "left_upper_leg": (3, 4),
+    "right_upper_leg": (2, 1),
+    "left_lower_leg": (4, 5),
+    "right_lower_leg": (1, 0),
+    "head": (12, 13),
+    "torso": (12, 14),
+}
+SHELF_ACTORS = (0, 1, 2)
+
+
+def evaluate_shelf_poses(pred: pd.DataFrame, gt: pd.DataFrame) -> list[MetricRow]:
+    """Score canonical-23 predictions (person ids = ground-truth ids) against SHELF15 ground truth.
+
+    Returns:
+        ``pcp_actor1``..``pcp_actor3`` and ``pcp_avg`` (percent; the average of the three actors),
+        ``pcp_<part>`` over the three actors (``pcp_head`` is the weakest part for every method, so it
+        is worth reading on its own), ``mpjpe_mm`` over the 14 evaluated joints.
+    """
+    shelf15 = SKELETONS["shelf15"].joints
+    g = poses_to_dense(gt, shelf15)
+    p = poses_to_dense(pred, CANONICAL_JOINTS)
+    scores = np.where(p.valid, 1.0, 0.0)
+    pred15, pred_scores = from_canonical(np.nan_to_num(p.joints_world_m), scores, "shelf15")
+    pred15 = np.where(pred_scores[..., None] > 0, pred15, np.nan)
+    index = {(f, i): n for n, (f, i) in enumerate(zip(p.frame, p.person_id))}
+    rows = np.array([index.get((f, i), -1) for f, i in zip(g.frame, g.person_id)], dtype=np.int64)
+    X = np.full_like(g.joints_world_m, np.nan)
+    X[rows >= 0] = pred15[rows[rows >= 0]]
+    correct = pcp_correct(X, g.joints_world_m, list(SHELF_PCP_PARTS.values()))  # (N, 10)
+    out, per_actor = [], []
+    for k, actor in enumerate(SHELF_ACTORS):
+        sel = g.person_id == actor
+        value = 100.0 * correct[sel].mean() if sel.any() else float("nan")
+        per_actor.append(value)
+        out.append(MetricRow(f"pcp_actor{k + 1}", value, "%"))
+    out.append(MetricRow("pcp_avg", float(np.nanmean(per_actor)), "%"))
+    actors = np.isin(g.person_id, SHELF_ACTORS)
+    for j, name in enumerate(SHELF_PCP_PARTS):
+        out.append(MetricRow(f"pcp_{name}", 100.0 * correct[actors, j].mean() if actors.any() else float("nan"), "%"))
+    evaluated = g.valid[:, :14] & actors[:, None]
+    out.append(MetricRow("mpjpe_mm", mpjpe_mm(X[:, :14], g.joints_world_m[:, :14], evaluated), "mm"))
     return out

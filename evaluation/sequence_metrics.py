@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from evaluation.protocols import evaluate_canonical_poses, evaluate_reprojection, metrics_table
+from evaluation.protocols import evaluate_canonical_poses, evaluate_reprojection, evaluate_shelf_poses, metrics_table
 from humancal.camera import Camera
 from humancal.sequences import SequenceSpec
 
@@ -23,6 +23,8 @@ def baseline_metrics(
     """3D accuracy (dataset protocol) and 2D reprojection error of a canonical-23 reconstruction."""
     if spec.kind == "synthetic":
         rows = evaluate_canonical_poses(poses, gt_poses3d)
+    elif spec.kind == "shelf":
+        rows = evaluate_shelf_poses(poses, gt_poses3d)
     else:
         raise ValueError(f"sequence {spec.key}: no evaluation protocol for dataset kind {spec.kind!r}")
     rows += evaluate_reprojection(poses, detections, associations, cameras)
