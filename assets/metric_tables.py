@@ -5,7 +5,7 @@ import dagster as dg
 import pandas as pd
 
 from assets.common import UPDATE_CONDITION, table_metadata, table_output
-from evaluation.sequence_metrics import baseline_metrics
+from evaluation.sequence_metrics import sequence_metric_table
 from humancal.camera import cameras_from_table
 from pipelines.partitions import SEQUENCES
 from resources.datasets import DatasetsResource
@@ -27,10 +27,15 @@ def metric_tables(
     gt_poses3d: pd.DataFrame,
     gt_associations: pd.DataFrame,
 ) -> dg.Output:
-    """MPJPE, PCP and reprojection error of each method (today: the gt_camera_triangulation baseline)."""
+    """MPJPE, PCP and reprojection error of each method; detection grouping quality on real datasets."""
     spec = datasets.spec(context.partition_key)
-    table = baseline_metrics(
-        spec, gt_camera_triangulation, raw_detections, gt_associations, cameras_from_table(gt_cameras), gt_poses3d
+    table = sequence_metric_table(
+        spec,
+        gt_camera_triangulation=gt_camera_triangulation,
+        detections=raw_detections,
+        associations=gt_associations,
+        cameras=cameras_from_table(gt_cameras),
+        gt_poses3d=gt_poses3d,
     )
     headline = table[~table["metric"].str.contains("/")]
     return table_output(

@@ -59,7 +59,7 @@ def check_detections_plausible(detections: pd.DataFrame, views: pd.DataFrame, ma
     return CheckReport(passed, text, figures)
 
 
-def check_cameras_valid(cameras: pd.DataFrame, tol: float = 1e-6) -> CheckReport:
+def check_cameras_valid(cameras: pd.DataFrame, tol: float = 1e-5) -> CheckReport:
     """Every camera has finite positive focal lengths, a principal point inside the image and a proper
     rotation (orthonormal, determinant +1: a right-handed camera frame)."""
     worst_orth, worst_det, bad = 0.0, 0.0, []

@@ -1,0 +1,273 @@
+"""Configuration of a synthetic scene: the scene itself (:class:`SceneConfig`) and the detector model
+(:class:`DetectorNoise`).
+
+Both are frozen dataclasses validated on construction: a bad value raises a one-line ``ValueError`` naming the
+field, the value received and the allowed range. Every length is in metres, every image quantity in pixels.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Literal
+
+__all__ = [
+    "RigKind",
+    "RIG_KINDS",
+    "DetectorNoise",
+    "SceneConfig",
+    "MAX_PEOPLE",
+    "MIN_VIEWS",
+    "MAX_VIEWS",
+    "FOCAL_LIMITS_PX",
+    "IMAGE_SIZE_LIMITS_PX",
+]
+
+RigKind = Literal["ring", "arc", "h36m"]
+RIG_KINDS: tuple[str, ...] = ("ring", "arc", "h36m")
+"""Camera rig layouts: a full circle, a partial circle, or the four Human3.6M cameras (external data)."""
+
+MAX_PEOPLE = 8
+MIN_VIEWS, MAX_VIEWS = 2, 31
+FOCAL_LIMITS_PX = (500.0, 2500.0)
+"""Allowed focal lengths, pixels."""
+IMAGE_SIZE_LIMITS_PX = ((640, 480), (1920, 1080))
+"""Smallest and largest allowed image (width, height), pixels."""
+_AREA_PER_PERSON_M2 = 2.0
+"""Floor area each person needs to walk about without constant collisions, square metres."""
+
+
+def _check_range(owner: str, name: str, value: float, low: float, high: float, *, integer: bool = False) -> None:
+    kind = "an integer" if integer else "a number"
+    if integer and (isinstance(value, bool) or not isinstance(value, int)):
+        raise ValueError(f"{owner}.{name}={value!r} must be {kind} in [{low}, {high}]")
+    if not integer and (isinstance(value, bool) or not isinstance(value, (int, float))):
+        raise ValueError(f"{owner}.{name}={value!r} must be {kind} in [{low}, {high}]")
+    if not (math.isfinite(value) and low <= value <= high):
+        raise ValueError(f"{owner}.{name}={value!r} is out of range; allowed: [{low}, {high}]")
+
+
+def _check_interval(owner: str, name: str, value: object, low: float, high: float) -> tuple[float, float]:
+    if not (isinstance(value, (tuple, list)) and len(value) == 2):
+        raise ValueError(f"{owner}.{name}={value!r} must be a (min, max) pair within [{low}, {high}]")
+    lo, hi = value
+    for v in (lo, hi):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"{owner}.{name}={value!r} must hold two finite numbers within [{low}, {high}]")
+    if not (low <= lo <= hi <= high):
+        raise ValueError(f"{owner}.{name}={value!r} is out of range; allowed: min <= max within [{low}, {high}]")
+    return float(lo), float(hi)
+
+
+@dataclass(frozen=True)
+class DetectorNoise:
+    """How the simulated 2D pose detector errs (``docs/synthetic.md``, "Noise model").
+
+    Image-space spreads scale with the person's apparent height ``scale_px = fx * height_m / depth_m`` (pelvis
+    depth), so a far person gets proportionally smaller pixel errors, like a real detector working on a
+    resized crop. Per-joint spreads follow the COCO keypoint sigmas (hips noisier than eyes), normalised to a
+    mean weight of 1 over the 23 joints.
+
+    Attributes:
+        jitter_std_frac: std of the Gaussian jitter per image axis, as a fraction of ``scale_px`` (mean over
+            joints). 0.008 is about 3 px on a 400 px tall person.
+        occluded_jitter_factor: multiplies the jitter of a fully occluded joint (>= 1; partial occlusion
+            interpolates).
+        outlier_rate: probability that a detected joint is a gross outlier (in [0, 1]).
+        outlier_std_frac: std of an outlier's extra offset per axis, fraction of ``scale_px``.
+        score_mean: mean confidence of a clearly visible joint, in [0, 1].
+        score_std: std of the per-joint confidence noise.
+        occlusion_score_drop: confidence lost by a fully occluded joint.
+        border_margin_frac: width of the band inside the image border where confidence falls, fraction of
+            ``scale_px``.
+        border_score_drop: confidence lost by a joint right at the image border.
+        joint_miss_rate: probability that a visible, unoccluded joint is missing from its detection.
+        occluded_joint_miss_rate: probability that a fully occluded joint is missing (partial occlusion
+            interpolates between the two rates).
+        person_miss_rate: probability that a person in view gives no detection at all in a view and frame.
+        min_visible_joints: a person gives a detection only with at least this many joints inside the image
+            and not fully occluded (1..23).
+        false_positives_per_image: mean number of false-positive detections per view and frame (Poisson).
+        false_positive_fragment_prob: probability that a false positive is a fragment (one body part) rather
+            than a whole skeleton.
+        false_positive_score_mean: mean joint confidence of a false positive, in [0, 1].
+        flip_rate: probability that a detection has its left and right labels swapped.
+    """
+
+    jitter_std_frac: float = 0.008
+    occluded_jitter_factor: float = 3.0
+    outlier_rate: float = 0.005
+    outlier_std_frac: float = 0.08
+    score_mean: float = 0.85
+    score_std: float = 0.06
+    occlusion_score_drop: float = 0.5
+    border_margin_frac: float = 0.05
+    border_score_drop: float = 0.3
+    joint_miss_rate: float = 0.02
+    occluded_joint_miss_rate: float = 0.5
+    person_miss_rate: float = 0.03
+    min_visible_joints: int = 4
+    false_positives_per_image: float = 0.05
+    false_positive_fragment_prob: float = 0.5
+    false_positive_score_mean: float = 0.4
+    flip_rate: float = 0.02
+
+    def __post_init__(self) -> None:
+        owner = "DetectorNoise"
+        for name in ("jitter_std_frac", "outlier_std_frac"):
+            _check_range(owner, name, getattr(self, name), 0.0, 1.0)
+        _check_range(owner, "occluded_jitter_factor", self.occluded_jitter_factor, 1.0, 100.0)
+        for name in (
+            "outlier_rate",
+            "score_mean",
+            "score_std",
+            "occlusion_score_drop",
+            "border_margin_frac",
+            "border_score_drop",
+            "joint_miss_rate",
+            "occluded_joint_miss_rate",
+            "person_miss_rate",
+            "false_positive_fragment_prob",
+            "false_positive_score_mean",
+            "flip_rate",
+        ):
+            _check_range(owner, name, getattr(self, name), 0.0, 1.0)
+        _check_range(owner, "min_visible_joints", self.min_visible_joints, 1, 23, integer=True)
+        _check_range(owner, "false_positives_per_image", self.false_positives_per_image, 0.0, 20.0)
+
+    @classmethod
+    def none(cls) -> DetectorNoise:
+        """A perfect detector: exact projections, confidence 1, nothing missed, no false positives or flips.
+
+        Joints outside the image are still dropped, and a person needs one joint in the image to be detected.
+        """
+        return cls(
+            jitter_std_frac=0.0,
+            occluded_jitter_factor=1.0,
+            outlier_rate=0.0,
+            score_mean=1.0,
+            score_std=0.0,
+            occlusion_score_drop=0.0,
+            border_score_drop=0.0,
+            joint_miss_rate=0.0,
+            occluded_joint_miss_rate=0.0,
+            person_miss_rate=0.0,
+            min_visible_joints=1,
+            false_positives_per_image=0.0,
+            flip_rate=0.0,
+        )
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """Everything that defines a synthetic scene; the same config (seed included) gives the same scene.
+
+    Attributes:
+        num_people: people in the scene, 1..8.
+        num_views: static cameras, 2..31 (at most 4 for the ``"h36m"`` rig).
+        num_frames: frames to generate, >= 1.
+        fps: frame rate, frames per second (default 30).
+        seed: seed of the one ``numpy.random.Generator`` every random choice comes from (>= 0).
+        rig: camera layout: ``"ring"`` (full circle), ``"arc"`` (partial circle, ``arc_span_deg``) or
+            ``"h36m"`` (the Human3.6M cameras, read from the data root).
+        h36m_subject: which subject's calibration of the Human3.6M rig to use (``"S1"`` .. ``"S11"``).
+        focal_range_px: (min, max) focal length fx = fy, pixels, within [500, 2500]; each camera draws one.
+            Ignored by the ``"h36m"`` rig, which keeps its measured focal lengths.
+        image_size_px: (width, height) of every image, pixels, between 640x480 and 1920x1080.
+        area_size_m: (x, y) size of the rectangular capture area centred on the world origin, metres; people's
+            roots stay inside it.
+        camera_height_range_m: (min, max) height of the camera centres above the floor, metres.
+        area_fill: fraction of the horizontal field of view the capture area spans (sets each camera's
+            distance from its focal length), in [0.3, 1.2]; above 1 the area's edges leave the images.
+        arc_span_deg: angle covered by the cameras of an ``"arc"`` rig, degrees, in [30, 330].
+        height_range_m: (min, max) standing height of the people, metres, within [1.4, 2.0].
+        noise: the detector model.
+    """
+
+    num_people: int = 4
+    num_views: int = 5
+    num_frames: int = 300
+    fps: float = 30.0
+    seed: int = 0
+    rig: RigKind = "ring"
+    h36m_subject: str = "S1"
+    focal_range_px: tuple[float, float] = (900.0, 1600.0)
+    image_size_px: tuple[int, int] = (1920, 1080)
+    area_size_m: tuple[float, float] = (5.0, 4.0)
+    camera_height_range_m: tuple[float, float] = (1.5, 4.0)
+    area_fill: float = 0.9
+    arc_span_deg: float = 150.0
+    height_range_m: tuple[float, float] = (1.5, 1.95)
+    noise: DetectorNoise = field(default_factory=DetectorNoise)
+
+    def __post_init__(self) -> None:
+        owner = "SceneConfig"
+        _check_range(owner, "num_people", self.num_people, 1, MAX_PEOPLE, integer=True)
+        _check_range(owner, "num_views", self.num_views, MIN_VIEWS, MAX_VIEWS, integer=True)
+        _check_range(owner, "num_frames", self.num_frames, 1, 1_000_000, integer=True)
+        _check_range(owner, "fps", self.fps, 1.0, 1000.0)
+        _check_range(owner, "seed", self.seed, 0, 2**63 - 1, integer=True)
+        if self.rig not in RIG_KINDS:
+            raise ValueError(f"SceneConfig.rig={self.rig!r} is unknown; allowed: {list(RIG_KINDS)}")
+        if self.rig == "h36m" and self.num_views > 4:
+            raise ValueError(f"SceneConfig.num_views={self.num_views} is out of range for rig 'h36m'; allowed: [2, 4]")
+        subjects = {f"S{i}" for i in range(1, 12)}
+        if self.h36m_subject not in subjects:
+            raise ValueError(f"SceneConfig.h36m_subject={self.h36m_subject!r} is unknown; allowed: S1 .. S11")
+        focal = _check_interval(owner, "focal_range_px", self.focal_range_px, *FOCAL_LIMITS_PX)
+        (w_lo, h_lo), (w_hi, h_hi) = IMAGE_SIZE_LIMITS_PX
+        size = self.image_size_px
+        if not (
+            isinstance(size, (tuple, list))
+            and len(size) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in size)
+            and w_lo <= size[0] <= w_hi
+            and h_lo <= size[1] <= h_hi
+        ):
+            raise ValueError(
+                f"SceneConfig.image_size_px={size!r} is out of range; allowed: integer (width, height) "
+                f"from {w_lo}x{h_lo} to {w_hi}x{h_hi}"
+            )
+        area = self.area_size_m
+        if not (
+            isinstance(area, (tuple, list))
+            and len(area) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and 2.0 <= v <= 30.0 for v in area)
+        ):
+            raise ValueError(f"SceneConfig.area_size_m={area!r} is out of range; allowed: (x, y) each in [2, 30] m")
+        min_area = max(4.0, _AREA_PER_PERSON_M2 * self.num_people)
+        if area[0] * area[1] < min_area:
+            raise ValueError(
+                f"SceneConfig.area_size_m={area!r} is too small for {self.num_people} people; "
+                f"allowed: an area of at least {min_area:.1f} m^2"
+            )
+        cam_h = _check_interval(owner, "camera_height_range_m", self.camera_height_range_m, 0.3, 10.0)
+        _check_range(owner, "area_fill", self.area_fill, 0.3, 1.2)
+        _check_range(owner, "arc_span_deg", self.arc_span_deg, 30.0, 330.0)
+        heights = _check_interval(owner, "height_range_m", self.height_range_m, 1.4, 2.0)
+        if not isinstance(self.noise, DetectorNoise):
+            raise ValueError(f"SceneConfig.noise must be a DetectorNoise, got {type(self.noise).__name__}")
+        # Normalise containers to tuples of floats/ints so that equal configs compare and hash equal.
+        object.__setattr__(self, "focal_range_px", focal)
+        object.__setattr__(self, "image_size_px", (int(size[0]), int(size[1])))
+        object.__setattr__(self, "area_size_m", (float(area[0]), float(area[1])))
+        object.__setattr__(self, "camera_height_range_m", cam_h)
+        object.__setattr__(self, "height_range_m", heights)
+        object.__setattr__(self, "fps", float(self.fps))
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the scene, seconds."""
+        return self.num_frames / self.fps
+
+    def replace(self, **changes: object) -> SceneConfig:
+        """A copy with some fields changed (validated again).
+
+        Raises:
+            ValueError: an unknown field name, or an invalid value.
+        """
+        known = {f.name for f in fields(self)}
+        unknown = sorted(set(changes) - known)
+        if unknown:
+            raise ValueError(f"SceneConfig has no field(s) {unknown}; fields are {sorted(known)}")
+        return replace(self, **changes)
