@@ -28,4 +28,5 @@ def gt_camera_triangulation(
     """Baseline: ground-truth cameras and identities, confidence-weighted DLT per person and frame."""
     spec = datasets.spec(context.partition_key)
     poses = triangulate_identified(raw_detections, gt_associations, cameras_from_table(gt_cameras), spec.sequence)
+    context.log.info(f"{spec.key}: triangulated {int(poses['valid'].sum())} joints of {poses.groupby(['frame', 'person_id']).ngroups} person-frames")
     return table_output(poses, "poses3d", rows=len(poses), valid_joints=int(poses["valid"].sum()))

@@ -38,6 +38,7 @@ def metric_tables(
         gt_poses3d=gt_poses3d,
     )
     headline = table[~table["metric"].str.contains("/")]
+    context.log.info(f"{spec.key}: {len(table)} metric rows ({len(headline)} headline)")
     return table_output(
         table, "metrics", rows=len(table),
         summary=dg.MetadataValue.md(headline.to_markdown(index=False, floatfmt=".2f")),

@@ -47,6 +47,10 @@ def sequence_inputs(context: dg.AssetExecutionContext, body_model: BodyModelReso
     """Load (real datasets) or generate (synthetic) the inputs of one sequence."""
     spec = datasets.spec(context.partition_key)
     inputs = load_sequence_inputs(spec, body_model.get, datasets.root())
+    context.log.info(
+        f"{spec.key}: {inputs.detections.groupby(['frame', 'view', 'det_id']).ngroups} detections in "
+        f"{len(inputs.views)} views, {inputs.detections['frame'].nunique()} frames"
+    )
     for name in sorted(key.path[-1] for key in context.selected_asset_keys):
         table, attr, _ = _OUTPUTS[name]
         df = getattr(inputs, attr)

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 DEMO_PARTITION = "synthetic__demo"
-QUIET_RUN_CONFIG = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
+QUIET_RUN_CONFIG = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
 
 
 def dagster_home() -> Path:
