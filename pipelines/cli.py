@@ -3,6 +3,7 @@
     humancal demo                        materialize every per-sequence asset of synthetic__demo, print its metrics
     humancal update [--partition P ...]  materialize only what is missing or stale
     humancal report [--partition P] [--format md|csv]
+    humancal export detections|cameras --partition P --format F --out PATH
     humancal ui                          the Dagster UI on 127.0.0.1
 
 All commands share one persistent Dagster instance in ``<state dir>/dagster_home`` (telemetry off),
@@ -141,6 +142,36 @@ def cmd_report(args) -> int:
     return 0
 
 
+def _stored_table(asset: str, partition: str):
+    import pandas as pd
+
+    from pipelines.definitions import artifacts_root
+    from resources.io_managers import partition_path
+
+    path = partition_path(artifacts_root(), asset, partition)
+    if not path.exists():
+        raise SystemExit(f"humancal: {asset} of {partition} is not stored ({path}); run `humancal update --partition {partition}`")
+    return pd.read_parquet(str(path))
+
+
+def cmd_export(args) -> int:
+    """Hand detections or cameras of a partition to other tools (OpenPose JSON; Pose2Sim, anipose,
+    EasyMocap, COLMAP, Shelf or humancal camera files)."""
+    from humancal.camera import cameras_from_table
+    from humancal.formats import write_cameras, write_openpose
+
+    if args.what == "detections":
+        if args.format != "openpose":
+            raise SystemExit("humancal: detections export supports --format openpose")
+        folders = write_openpose(_stored_table("raw_detections", args.partition), args.out, overwrite=args.overwrite)
+        print(f"wrote OpenPose JSON for {len(folders)} views under {args.out}")
+    else:
+        cameras = cameras_from_table(_stored_table(args.cameras_asset, args.partition))
+        path = write_cameras(cameras, args.out, args.format)
+        print(f"wrote {len(cameras)} cameras ({args.format}) to {path}")
+    return 0
+
+
 def cmd_ui(args) -> int:
     home = dagster_home()
     env = dict(os.environ, DAGSTER_HOME=str(home))
@@ -167,6 +198,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("md", "csv"), default="md")
     p.add_argument("--all", action="store_true", help="include per-joint / per-view rows")
     p.set_defaults(func=cmd_report)
+    p = sub.add_parser("export", help="write stored detections or cameras in another tool's format")
+    p.add_argument("what", choices=("detections", "cameras"))
+    p.add_argument("--partition", required=True)
+    p.add_argument("--format", required=True,
+                   help="openpose (detections); humancal, shelf, pose2sim, anipose, easymocap, colmap (cameras)")
+    p.add_argument("--out", required=True, help="output folder (detections, easymocap, colmap) or file")
+    p.add_argument("--cameras-asset", default="gt_cameras", help="which stored cameras table to export")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=cmd_export)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
     p.add_argument("--port", type=int, default=3000)
     p.set_defaults(func=cmd_ui)

@@ -80,3 +80,22 @@ def test_ui_starts_and_stops_on_sigterm(tmp_path):
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
+
+
+def test_export_cameras_roundtrips_through_a_tool_format(tmp_path, monkeypatch, capsys):
+    import numpy as np
+
+    from humancal.camera import Camera, cameras_to_table
+    from humancal.formats import read_cameras
+
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    cams = [Camera(np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]]), np.eye(3), np.array([0.1, 0.2, 3.0]), 1280, 720)]
+    folder = tmp_path / "artifacts" / "gt_cameras"
+    folder.mkdir(parents=True)
+    cameras_to_table(cams, "s").to_parquet(folder / "d__s.parquet")
+    out = tmp_path / "calib.toml"
+    assert main(["export", "cameras", "--partition", "d__s", "--format", "pose2sim", "--out", str(out)]) == 0
+    back = read_cameras(out, format="pose2sim")
+    assert np.allclose(back[0].K, cams[0].K) and np.allclose(back[0].t_cam_from_world_m, [0.1, 0.2, 3.0])
+    with pytest.raises(SystemExit, match="is not stored"):
+        main(["export", "detections", "--partition", "d__s", "--format", "openpose", "--out", str(tmp_path / "op")])
