@@ -19,7 +19,7 @@ _OUTPUTS = {
     "gt_associations": ("associations", "gt_associations", "Ground-truth person id of each detection (evaluation only)."),
     "gt_people": ("people", "gt_people", "Ground-truth body shape of each person (empty where unknown)."),
 }
-CODE_VERSION = "1"
+CODE_VERSION = "2"
 
 
 @dg.multi_asset(
