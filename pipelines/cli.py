@@ -138,7 +138,8 @@ def cmd_update(args) -> int:
 
 
 def cmd_report(args) -> int:
-    _print_metrics(_stored_metrics(args.partition, headline_only=not args.all), args.format)
+    # Markdown is for reading: headline rows unless --all; CSV is for tools: every row.
+    _print_metrics(_stored_metrics(args.partition, headline_only=args.format == "md" and not args.all), args.format)
     return 0
 
 
@@ -196,7 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", help="print stored metric tables")
     p.add_argument("--partition", action="append", help="only this partition (repeatable)")
     p.add_argument("--format", choices=("md", "csv"), default="md")
-    p.add_argument("--all", action="store_true", help="include per-joint / per-view rows")
+    p.add_argument("--all", action="store_true", help="md: include per-joint / per-view rows (csv always has them)")
     p.set_defaults(func=cmd_report)
     p = sub.add_parser("export", help="write stored detections or cameras in another tool's format")
     p.add_argument("what", choices=("detections", "cameras"))
