@@ -23,6 +23,10 @@ UPDATE_CONDITION = (
 materialized, its code_version changed, or an upstream asset produced different data."""
 
 
+REQUIRES_DATA_KEY = "humancal/requires_data"
+"""Asset metadata naming the data-root folder an unpartitioned asset reads (e.g. ``cmu_mocap``)."""
+
+
 def table_metadata(name: str) -> dict[str, str]:
     """Asset metadata declaring that an asset holds canonical table ``name``."""
     return {TABLE_METADATA_KEY: name}

@@ -120,6 +120,20 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _assets_missing_data(defs) -> dict:
+    """Unpartitioned assets whose external data folder is not under the data root here."""
+    from assets.common import REQUIRES_DATA_KEY
+
+    root = defs.resources["datasets"].root()
+    graph = defs.resolve_asset_graph()
+    missing = {}
+    for key in graph.materializable_asset_keys:
+        folder = (graph.get(key).metadata or {}).get(REQUIRES_DATA_KEY)
+        if folder and (root is None or not (root / folder).is_dir()):
+            missing[key] = folder
+    return missing
+
+
 def cmd_update(args) -> int:
     from pipelines.definitions import defs
     from pipelines.update import update
@@ -132,7 +146,11 @@ def cmd_update(args) -> int:
         names = ", ".join(f"{k.to_user_string()}[{p}]" if p else k.to_user_string() for k, p in items)
         print(f"round {n}: {len(items)} stale or missing: {names}", flush=True)
 
-    result = update(defs, instance, partitions=args.partition or None, on_round=on_round, run_config=QUIET_RUN_CONFIG)
+    exclude = _assets_missing_data(defs)
+    for key, folder in exclude.items():
+        print(f"skipping {key.to_user_string()}: it needs {folder}/ under the data root (HUMANCAL_DATA_DIR)")
+    result = update(defs, instance, partitions=args.partition or None, exclude=list(exclude),
+                    on_round=on_round, run_config=QUIET_RUN_CONFIG)
     print(f"materialized {result.count} asset partitions")
     return 0
 

@@ -6,6 +6,7 @@ import dagster as dg
 
 from assets.baselines import gt_camera_triangulation
 from assets.metric_tables import metric_tables
+from assets.mocap import mocap_clips
 from assets.registry import sequence_registry
 from assets.sequence_inputs import sequence_inputs
 from humancal.settings import state_dir
@@ -16,7 +17,7 @@ from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFa
 PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, metric_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
-SHARED_ASSETS = [sequence_registry]
+SHARED_ASSETS = [sequence_registry, mocap_clips]
 """Unpartitioned assets."""
 
 

@@ -54,7 +54,10 @@ def _resolver(defs: dg.Definitions, instance: dg.DagsterInstance) -> CachingStal
 
 
 def stale_asset_partitions(
-    defs: dg.Definitions, instance: dg.DagsterInstance, partitions: Iterable[str] | None = None
+    defs: dg.Definitions,
+    instance: dg.DagsterInstance,
+    partitions: Iterable[str] | None = None,
+    exclude: Iterable[dg.AssetKey] = (),
 ) -> list[tuple[dg.AssetKey, str | None]]:
     """Asset partitions Dagster reports as MISSING or STALE.
 
@@ -63,13 +66,17 @@ def stale_asset_partitions(
         instance: the Dagster instance holding materialization history.
         partitions: restrict partitioned assets to these keys (default: all registered ones).
             Unpartitioned assets are considered only when no restriction is given.
+        exclude: assets not to consider (e.g. those whose external data is missing here).
     """
     resolver = _resolver(defs, instance)
     graph = defs.resolve_asset_graph()
     registered = set(instance.get_dynamic_partitions(SEQUENCES.name))
     wanted = registered if partitions is None else registered & set(partitions)
     out = []
+    excluded = set(exclude)
     for key in sorted(graph.materializable_asset_keys, key=lambda k: k.to_user_string()):
+        if key in excluded:
+            continue
         node = graph.get(key)
         if node.partitions_def is None:
             if partitions is None and resolver.get_status(key) != StaleStatus.FRESH:
@@ -85,6 +92,7 @@ def update(
     defs: dg.Definitions,
     instance: dg.DagsterInstance,
     partitions: Iterable[str] | None = None,
+    exclude: Iterable[dg.AssetKey] = (),
     max_rounds: int = 20,
     on_round: Callable[[int, list[tuple[dg.AssetKey, str | None]]], None] | None = None,
     run_config: dict | None = None,
@@ -95,10 +103,11 @@ def update(
         RuntimeError: something is still stale after ``max_rounds`` rounds, or a run failed.
     """
     partitions = None if partitions is None else list(partitions)
+    exclude = list(exclude)
     graph = defs.resolve_asset_graph()
     done: list[tuple[str, str | None]] = []
     for round_no in range(1, max_rounds + 1):
-        todo = stale_asset_partitions(defs, instance, partitions)
+        todo = stale_asset_partitions(defs, instance, partitions, exclude)
         if not todo:
             return UpdateResult(tuple(done), round_no - 1)
         pending = set(todo)
@@ -125,4 +134,4 @@ def update(
             if not result.success:
                 raise RuntimeError(f"run for partition {pk} failed")
             done.extend((key.to_user_string(), pk) for key in keys)
-    raise RuntimeError(f"still stale after {max_rounds} rounds: {stale_asset_partitions(defs, instance, partitions)[:5]}")
+    raise RuntimeError(f"still stale after {max_rounds} rounds: {stale_asset_partitions(defs, instance, partitions, exclude)[:5]}")

@@ -1,0 +1,145 @@
+"""Camera calibration metrics against ground-truth cameras (the paper's Table: focal, position, angle, reprojection).
+
+Protocol:
+
+* The estimated rig is brought onto the ground-truth world by the least-squares **similarity** (Umeyama) of the
+  camera centres (with two cameras, points one baseline ahead on each optical axis are added so that the
+  rotation about the baseline is fixed): :func:`humancal.calibration.alignment.align_rig`.
+* ``focal_error_pct``: ``100 |f_est - f_gt| / f_gt`` with ``f = sqrt(fx fy)``.
+* ``position_error_mm``: distance between the aligned estimated centre and the true centre.
+* ``angle_error_deg``: geodesic angle between the aligned estimated rotation and the true one.
+* ``reprojection_error_px``: each ground-truth person (identities from the ground-truth associations: evaluation
+  only) is triangulated per frame from all its detections with the estimated cameras (confidence-weighted DLT,
+  :func:`humancal.geometry.triangulation.triangulate_dlt`) and reprojected; the mean pixel distance over the
+  detected keypoints. ``reprojection_error_gt_cameras_px`` is the same with the ground-truth cameras: the floor
+  set by the detections themselves.
+
+Every metric is reported per view (suffix ``/view_<v>``) and as the mean over views (no suffix).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from evaluation.protocols import MetricRow, metrics_table
+from humancal.calibration.alignment import Similarity, align_rig
+from humancal.camera import Camera
+from humancal.detections import detections_to_dense
+from humancal.geometry.triangulation import reprojection_errors_px, triangulate_dlt
+
+__all__ = ["CameraErrors", "camera_errors", "reprojection_errors_per_view", "camera_metrics", "camera_metrics_table"]
+
+METHOD = "init"
+
+
+class CameraErrors(dict):
+    """Per-view arrays ``focal_error_pct``, ``position_error_mm``, ``angle_error_deg`` and the ``alignment``."""
+
+
+def _angle_deg(R: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def camera_errors(estimated: list[Camera], ground_truth: list[Camera]) -> CameraErrors:
+    """Focal, position and angle errors of every view after the similarity alignment of the centres.
+
+    Returns:
+        :class:`CameraErrors` with (V,) arrays and the :class:`~humancal.calibration.alignment.Similarity`.
+
+    Raises:
+        ValueError: the rigs differ in size.
+    """
+    sim: Similarity = align_rig(estimated, ground_truth)
+    f_est = np.array([np.sqrt(c.K[0, 0] * c.K[1, 1]) for c in estimated])
+    f_gt = np.array([np.sqrt(c.K[0, 0] * c.K[1, 1]) for c in ground_truth])
+    aligned = [sim.apply_to_camera(c) for c in estimated]
+    pos = np.array([1000.0 * np.linalg.norm(a.center_world_m - g.center_world_m) for a, g in zip(aligned, ground_truth)])
+    ang = np.array([_angle_deg(a.R_cam_from_world @ g.R_cam_from_world.T) for a, g in zip(aligned, ground_truth)])
+    return CameraErrors(focal_error_pct=100.0 * np.abs(f_est - f_gt) / f_gt, position_error_mm=pos,
+                        angle_error_deg=ang, alignment=sim)
+
+
+def reprojection_errors_per_view(
+    cameras: list[Camera], detections: pd.DataFrame, associations: pd.DataFrame, min_score: float = 0.0
+) -> np.ndarray:
+    """Mean reprojection error per view of the people triangulated (per frame) with ``cameras``.
+
+    Args:
+        cameras: V cameras.
+        detections: canonical ``detections`` table.
+        associations: canonical ``associations`` table (true ``person_id``; -1 rows are ignored).
+        min_score: keypoints below this confidence are neither used nor scored.
+
+    Returns:
+        (V,) mean pixel error over the detected keypoints of associated detections (NaN for a view without any).
+    """
+    dense = detections_to_dense(detections)
+    ids = associations.set_index(["frame", "view", "det_id"])["person_id"]
+    person = ids.reindex(pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])).fillna(-1).to_numpy(int)
+    keep = person >= 0
+    V = len(cameras)
+    keys, inverse = np.unique(np.c_[dense.frame[keep], person[keep]], axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    n, J = len(keys), dense.keypoints_px.shape[1]
+    px = np.full((V, n, J, 2), np.nan)
+    w = np.zeros((V, n, J))
+    views = dense.view[keep]
+    kp = dense.keypoints_px[keep]
+    sc = np.where(dense.scores[keep] > min_score, dense.scores[keep], 0.0)
+    px[views, inverse] = kp
+    w[views, inverse] = sc
+    X, _ = triangulate_dlt(cameras, px.reshape(V, n * J, 2), w.reshape(V, n * J))
+    err = reprojection_errors_px(cameras, X, px.reshape(V, n * J, 2)).reshape(V, n, J)
+    err = np.where(w > 0, err, np.nan)
+    out = np.full(V, np.nan)
+    for v in range(V):
+        e = err[v][np.isfinite(err[v])]
+        out[v] = e.mean() if len(e) else np.nan
+    return out
+
+
+def _rows(name: str, values: np.ndarray, unit: str) -> list[MetricRow]:
+    rows = [MetricRow(name, float(np.nanmean(values)) if np.isfinite(values).any() else float("nan"), unit)]
+    rows += [MetricRow(f"{name}/view_{v}", float(x), unit) for v, x in enumerate(values)]
+    return rows
+
+
+def camera_metrics(
+    estimated: list[Camera],
+    ground_truth: list[Camera],
+    detections: pd.DataFrame | None = None,
+    associations: pd.DataFrame | None = None,
+) -> list[MetricRow]:
+    """All camera metrics (see the module docstring) as metric rows.
+
+    Args:
+        estimated: the calibrated cameras.
+        ground_truth: the true cameras, same views.
+        detections, associations: when both are given, the reprojection metrics are added.
+
+    Returns:
+        Rows ``focal_error_pct``, ``position_error_mm``, ``angle_error_deg`` (and ``reprojection_error_px``,
+        ``reprojection_error_gt_cameras_px``), each as the mean over views and per view ``/view_<v>``.
+    """
+    err = camera_errors(estimated, ground_truth)
+    rows = (_rows("focal_error_pct", err["focal_error_pct"], "%") + _rows("position_error_mm", err["position_error_mm"], "mm")
+            + _rows("angle_error_deg", err["angle_error_deg"], "deg"))
+    if detections is not None and associations is not None:
+        rows += _rows("reprojection_error_px", reprojection_errors_per_view(estimated, detections, associations), "px")
+        rows += _rows("reprojection_error_gt_cameras_px",
+                      reprojection_errors_per_view(ground_truth, detections, associations), "px")
+    return rows
+
+
+def camera_metrics_table(
+    dataset: str,
+    sequence: str,
+    estimated: list[Camera],
+    ground_truth: list[Camera],
+    detections: pd.DataFrame | None = None,
+    associations: pd.DataFrame | None = None,
+    method: str = METHOD,
+) -> pd.DataFrame:
+    """The canonical ``metrics`` table of :func:`camera_metrics` (method ``"init"`` by default)."""
+    return metrics_table(dataset, sequence, method, camera_metrics(estimated, ground_truth, detections, associations))

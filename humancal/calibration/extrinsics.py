@@ -1,0 +1,387 @@
+"""Initial extrinsics (and multi-view focal lengths) of all views from lifted 3D poses (the paper's III-B).
+
+Steps (each in its own module):
+
+1. relative rotations from Procrustes alignment of lifted poses over all candidate detection pairs of each
+   frame, with a consensus over many frames, then rotation averaging (camera 0 = identity)
+   (:mod:`.rotation_consensus`);
+2. root positions per detection by a translation-only PnP, then one linear solve of all translations *and*
+   focal lengths from the candidate pairs, Cauchy-reweighted so wrong pairs drop out (:mod:`.translations`);
+   repeated a few times because the roots depend on the focal lengths;
+3. cross-view groups (one person in one frame) from the consistent pairs (:mod:`.matching`);
+4. a bundle adjustment over focal lengths, rotations, translations and the groups' keypoints, with the lifted
+   poses as a metric shape prior (:mod:`.multiview_focal`): this recovers the focal lengths that single views
+   cannot observe (level or straight-down cameras) and removes the bias of the linear solve;
+5. the final world frame: Z up, floor at z = 0 from the standing people (:mod:`.floor`).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pandas as pd
+
+from humancal.calibration.floor import FloorAlignment, align_to_floor
+from humancal.calibration.intrinsics import IntrinsicsEstimate
+from humancal.calibration.matching import groups_from_pairs
+from humancal.calibration.multiview_focal import bundle_adjust
+from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
+from humancal.calibration.translations import resect_focal_translation, root_positions, solve_focals_translations
+from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted
+from humancal.camera import Camera
+from humancal.detections import DenseDetections
+
+__all__ = ["ExtrinsicsConfig", "ExtrinsicsDiagnostics", "ExtrinsicsEstimate", "estimate_extrinsics"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ExtrinsicsConfig:
+    """Settings of :func:`estimate_extrinsics`.
+
+    Attributes:
+        rotation_threshold_deg: consensus radius of the pairwise rotation vote, degrees.
+        max_pose_error_m: detection pairs whose aligned lifted poses differ more (RMS) are not the same person.
+        max_frames_per_pair: shared frames used per view pair for the rotation vote (all views: at most
+            ``max_pair_hypotheses`` pairs in total are kept by lowering it).
+        max_pair_hypotheses: budget of detection pairs over all view pairs for the rotation vote.
+        min_pair_support: a view pair needs this many supporting detections to be an edge.
+        linear_iterations: passes of (root positions, linear focal + translation solve).
+        linear_max_rel_std: a view whose linear focal has a larger data-only relative std is resected instead.
+        single_view_min_rel_std: floor on the prior std of well-conditioned single-view focal lengths.
+        focal_range_rel: allowed focal range, multiples of the image diagonal (clips the initial values).
+        max_groups: matched groups used by the bundle adjustment (spread over the sequence).
+        shape_std_m: std of the lifted joints in the bundle adjustment, metres.
+        bundle_iterations: Levenberg-Marquardt iterations.
+        max_focal_rel_std: a final focal with a larger relative std is reported as ``poorly_constrained``.
+        square_pixels: one focal per view (fx = fy).
+        align_floor: move the result to the Z-up, floor z = 0 frame (else camera 0 stays the world).
+        upright_threshold: groups at least this upright (mean score) count as standing for the floor.
+        seed: randomness of the subsampling.
+    """
+
+    rotation_threshold_deg: float = 10.0
+    max_pose_error_m: float = 0.15
+    max_frames_per_pair: int = 200
+    max_pair_hypotheses: int = 150_000
+    min_pair_support: int = 5
+    linear_iterations: int = 6
+    linear_max_rel_std: float = 0.15
+    single_view_min_rel_std: float = 0.05
+    focal_range_rel: tuple[float, float] = (0.15, 5.0)
+    max_groups: int = 200
+    shape_std_m: float = 0.1
+    bundle_iterations: int = 40
+    max_focal_rel_std: float = 0.05
+    square_pixels: bool = True
+    align_floor: bool = True
+    upright_threshold: float = 0.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.rotation_threshold_deg < 90.0:
+            raise ValueError(f"ExtrinsicsConfig.rotation_threshold_deg={self.rotation_threshold_deg} not in (0, 90)")
+        if self.max_groups < 3:
+            raise ValueError(f"ExtrinsicsConfig.max_groups={self.max_groups} must be >= 3")
+        if not 0.0 < self.focal_range_rel[0] < self.focal_range_rel[1]:
+            raise ValueError(f"ExtrinsicsConfig.focal_range_rel={self.focal_range_rel} must be 0 < low < high")
+
+    def replace(self, **changes) -> ExtrinsicsConfig:
+        """A validated copy with some fields changed."""
+        return replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class ExtrinsicsDiagnostics:
+    """What :func:`estimate_extrinsics` found along the way.
+
+    Attributes:
+        per_view: one row per view: ``view``, ``focal_single_view_px``, ``single_view_status``,
+            ``focal_linear_px``, ``focal_px`` (final), ``focal_rel_std`` (final), ``focal_status`` (``"ok"`` or
+            ``"poorly_constrained"``), ``focal_source`` (how the bundle adjustment was started:
+            ``"single_view+bundle"`` (a well-conditioned single-view focal, also its prior), ``"linear+bundle"``
+            or ``"resection+bundle"`` (recovered from the other views)),
+            ``reprojection_rms_px``, ``rotation_edges``.
+        pairs: one row per view pair: ``view_a``, ``view_b``, ``support``, ``residual_deg`` (disagreement of the
+            pair rotation with the averaged rotations; NaN when unused).
+        groups: the matched detections used: ``frame``, ``view``, ``det_id``, ``group``.
+        floor: the :class:`FloorAlignment` (None when ``align_floor`` is off).
+        bundle_inlier_fraction: keypoints within the Huber threshold in the bundle adjustment.
+        timings_s: seconds per step.
+    """
+
+    per_view: pd.DataFrame
+    pairs: pd.DataFrame
+    groups: pd.DataFrame
+    floor: FloorAlignment | None
+    bundle_inlier_fraction: float
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ExtrinsicsEstimate:
+    """Calibrated cameras (intrinsics refined by the multi-view step) and diagnostics."""
+
+    cameras: list[Camera]
+    diagnostics: ExtrinsicsDiagnostics
+
+
+def _check_inputs(detections: DenseDetections, lifted: LiftedPoses, intrinsics: Sequence[IntrinsicsEstimate]) -> int:
+    check_lifted(detections, lifted)
+    V = len(intrinsics)
+    if V < 2:
+        raise CalibrationError(
+            f"extrinsics need at least two views, got {V}: a single camera has no relative pose to estimate"
+        )
+    if [e.view for e in intrinsics] != list(range(V)):
+        raise ValueError(f"intrinsics must be given for views 0..{V - 1} in order, got {[e.view for e in intrinsics]}")
+    if len(detections) and (detections.view.min() < 0 or detections.view.max() >= V):
+        raise ValueError(f"detections name views outside 0..{V - 1}")
+    empty = [v for v in range(V) if not np.any(detections.view == v)]
+    if empty:
+        raise CalibrationError(f"views {empty} have no detections: their cameras cannot be calibrated")
+    return V
+
+
+def _initial_focals(intrinsics, config):
+    """Initial focal lengths, their prior std (inf: no prior) and the image diagonals.
+
+    A well-conditioned single-view focal is kept; an ill-conditioned or missing one starts from the median
+    (relative to the image diagonal) of the plausible single-view values, or the diagonal when there is none:
+    the linear solve and the bundle adjustment then determine it from the other views.
+    """
+    diag = np.array([np.hypot(e.width_px, e.height_px) for e in intrinsics])
+    f = np.array([np.sqrt(e.fx_px * e.fy_px) for e in intrinsics])
+    ok = np.array([e.status == "ok" for e in intrinsics])
+    plausible = np.isfinite(f) & (f > 0.3 * diag) & (f < 3.0 * diag)
+    ref = ok & plausible if (ok & plausible).any() else plausible
+    typical = float(np.median(f[ref] / diag[ref])) if ref.any() else 1.0
+    f = np.where(ok & np.isfinite(f), f, typical * diag)
+    lo, hi = config.focal_range_rel
+    f = np.clip(f, lo * diag, hi * diag)
+    rel = np.array([max(e.focal_rel_uncertainty, config.single_view_min_rel_std) for e in intrinsics])
+    return f, np.where(ok, rel, np.inf), diag
+
+
+def _resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, diag, config):
+    """Re-estimate every view's focal and translation from the people placed by the other views.
+
+    The linear solve sees a view's focal only through the spread of its people's depths, which vanishes for a
+    camera looking straight down (all people at about the same depth) and is attenuated by depth noise;
+    resection uses the perspective of the 3D keypoints instead.
+    """
+    V = len(f)
+    view = detections.view
+    Rt = np.transpose(R, (0, 2, 1))
+    f_new, t_new = f.copy(), t.copy()
+    for v in range(V):
+        X, x, w = [], [], []
+        for g in groups:
+            mine = g[view[g] == v]
+            others = g[view[g] != v]
+            if len(mine) != 1 or len(others) == 0:
+                continue
+            d = mine[0]
+            world = np.mean([Rt[view[o]] @ (lifted.joints_cam_m[o] + roots_T[o] - t[view[o]]).T for o in others],
+                            axis=0).T
+            X.append(world)
+            x.append(detections.keypoints_px[d])
+            w.append(np.where(detections.scores[d] >= 0.3, detections.scores[d], 0.0))
+        if len(X) < 3:
+            continue
+        fv, tv, _ = resect_focal_translation(np.concatenate(X), np.concatenate(x), np.concatenate(w), R[v], pp[v])
+        lo, hi = config.focal_range_rel[0] * diag[v], config.focal_range_rel[1] * diag[v]
+        if np.isfinite(fv) and lo <= fv <= hi and np.isfinite(tv).all():
+            f_new[v], t_new[v] = fv, tv
+    return f_new, t_new
+
+
+def _rotations(detections, lifted, V, rng, config):
+    """Consensus pair rotations (hypothesis budget spread over the view pairs) and their average."""
+    n_pairs = V * (V - 1) // 2
+    per_view_dets = np.bincount(detections.view, minlength=V)
+    frames = max(len(np.unique(detections.frame)), 1)
+    per_frame = np.maximum(per_view_dets / frames, 1.0)
+    budget = config.max_pair_hypotheses / (n_pairs * float(np.mean(per_frame)) ** 2)
+    max_frames = int(max(20, min(config.max_frames_per_pair, budget)))
+    pairs = pairwise_rotations(detections, lifted, V, rng, max_frames=max_frames,
+                               max_pose_error_m=config.max_pose_error_m, threshold_deg=config.rotation_threshold_deg)
+    R, residual_deg = average_rotations(pairs, V, min_support=config.min_pair_support)
+    used = [p for p in pairs if p.support >= config.min_pair_support]
+    rows_a = np.concatenate([p.rows_a for p in used])
+    rows_b = np.concatenate([p.rows_b for p in used])
+    return R, residual_deg, pairs, rows_a, rows_b
+
+
+def _linear(detections, lifted, rows_a, rows_b, R, f0, prior_rel, pp, diag, config):
+    """Alternate root positions and the linear focal + translation solve until the focal lengths settle."""
+    # every view keeps a weak prior so that an unobservable focal stays finite (100 % std)
+    lin_prior_rel = np.where(np.isfinite(prior_rel), prior_rel, 1.0)
+    f = f0.copy()
+    for _ in range(config.linear_iterations):
+        roots = root_positions(detections, lifted, _K(f, f, pp))
+        sol = solve_focals_translations(roots, detections.view, rows_a, rows_b, R, f0, lin_prior_rel)
+        # the roots were computed at f: move at most by a factor 2 per pass (the linearisation is local)
+        step = np.clip(np.nan_to_num(sol.focal_px / f, nan=1.0, posinf=2.0, neginf=0.5), 0.5, 2.0)
+        f_new = np.clip(f * step, config.focal_range_rel[0] * diag, config.focal_range_rel[1] * diag)
+        converged = np.max(np.abs(np.log(f_new / f))) < 0.005
+        f = f_new
+        if converged:
+            break
+    return f, sol, root_positions(detections, lifted, _K(f, f, pp))
+
+
+def _pick_groups(groups, detections, max_groups, rng):
+    if len(groups) <= max_groups:
+        return groups
+    frames = np.array([detections.frame[g[0]] for g in groups])
+    sizes = np.array([len(g) for g in groups])
+    order = np.lexsort((rng.random(len(groups)), -sizes, frames))  # by frame, larger groups first
+    pick = order[np.linspace(0, len(order) - 1, max_groups).round().astype(int)]
+    return [groups[i] for i in np.sort(pick)]
+
+
+def _initial_points(groups, lifted, roots_T, view, R, t):
+    pts = np.zeros((len(groups), lifted.joints_cam_m.shape[1], 3))
+    Rt = np.transpose(R, (0, 2, 1))
+    for k, g in enumerate(groups):
+        world = [Rt[view[d]] @ (lifted.joints_cam_m[d] + roots_T[d]).T - (Rt[view[d]] @ t[view[d]])[:, None]
+                 for d in g]
+        pts[k] = np.mean(world, axis=0).T
+    return pts
+
+
+def estimate_extrinsics(
+    detections: DenseDetections,
+    lifted: LiftedPoses,
+    intrinsics: Sequence[IntrinsicsEstimate],
+    config: ExtrinsicsConfig | None = None,
+) -> ExtrinsicsEstimate:
+    """Extrinsics of all views, with focal lengths refined (and recovered where single views fail).
+
+    Args:
+        detections: dense 2D detections of all views and frames.
+        lifted: the lifted 3D pose of every detection (row-aligned), in camera frames or in the lifter's crop
+            frames (``box_centre_px`` given; turned into camera frames with the current focal lengths).
+        intrinsics: the single-view estimates of :func:`~humancal.calibration.intrinsics.estimate_intrinsics`,
+            one per view in view order (``status`` ``"no_upright"`` allowed: its focal is recovered here).
+        config: settings; defaults to :class:`ExtrinsicsConfig`.
+
+    Returns:
+        :class:`ExtrinsicsEstimate`: cameras in the world frame (Z up, floor z = 0 unless ``align_floor`` is off;
+        camera 0's frame otherwise), metres.
+
+    Raises:
+        CalibrationError: fewer than two views, a view without detections, a view sharing no matched people
+            with the others, or too few matched standing people for the floor.
+        ValueError: inconsistent inputs.
+    """
+    config = config or ExtrinsicsConfig()
+    V = _check_inputs(detections, lifted, intrinsics)
+    rng = np.random.default_rng(config.seed)
+    timings: dict[str, float] = {}
+
+    f0, prior_rel, diag = _initial_focals(intrinsics, config)
+    pp = np.array([e.K[:2, 2] for e in intrinsics])
+    # crop-frame poses (the lifter's) turn into camera frames by an angle that depends on the focal: convert
+    # with the initial focal lengths, and once more with the linear solution if it moved them noticeably
+    f_frame = f0.copy()
+    lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
+    for attempt in range(2 if lifted.in_crop_frame else 1):
+        clock = time.perf_counter()
+        R, residual_deg, pairs, rows_a, rows_b = _rotations(detections, lifted_cam, V, rng, config)
+        timings["rotations"] = timings.get("rotations", 0.0) + time.perf_counter() - clock
+        clock = time.perf_counter()
+        f, sol, roots = _linear(detections, lifted_cam, rows_a, rows_b, R, f0, prior_rel, pp, diag, config)
+        timings["linear"] = timings.get("linear", 0.0) + time.perf_counter() - clock
+        if not lifted.in_crop_frame or np.max(np.abs(np.log(f / f_frame))) < 0.05 or attempt == 1:
+            break
+        f_frame = f.copy()
+        lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
+    lifted = lifted_cam
+    f_linear = f.copy()
+
+    clock = time.perf_counter()
+    groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections))
+    if len(groups) < 3:
+        raise CalibrationError(f"only {len(groups)} people could be matched across views: cannot refine the cameras")
+    groups = _pick_groups(groups, detections, config.max_groups, rng)
+    # views the linear solve cannot see (focal at the end of the range, or a large data-only std): resection
+    lo, hi = config.focal_range_rel[0] * diag, config.focal_range_rel[1] * diag
+    blind = (sol.focal_rel_std_data > config.linear_max_rel_std) | (f <= lo * 1.01) | (f >= hi * 0.99)
+    t_init = sol.t_cam_from_world_m.copy()
+    if blind.any():
+        f_res, t_res = _resection_pass(groups, detections, lifted, np.nan_to_num(roots.T_cam_m), R, t_init, f, pp,
+                                       diag, config)
+        logger.info("views %s: focal from resection %s instead of the linear %s", np.flatnonzero(blind).tolist(),
+                    np.round(f_res[blind]).tolist(), np.round(f[blind]).tolist())
+        f = np.where(blind, f_res, f)
+        t_init[blind] = t_res[blind]
+    logger.info("linear focal std (data only) %s", np.round(sol.focal_rel_std_data, 3).tolist())
+    points = _initial_points(groups, lifted, np.nan_to_num(roots.T_cam_m), detections.view, R, t_init)
+    ba = bundle_adjust(
+        detections, lifted, groups, points, f, f, pp, R, t_init,
+        square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
+        shape_std_m=config.shape_std_m, max_iterations=config.bundle_iterations,
+    )
+    timings["bundle"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    R_final, t_final = ba.R_cam_from_world, ba.t_cam_from_world_m
+    floor = None
+    if config.align_floor:
+        upright = np.array([lifted.upright_score[g].mean() for g in groups])
+        floor = align_to_floor(ba.points_world_m, upright, R_final[0], upright_threshold=config.upright_threshold)
+        R_final, t_final = floor.apply_to_camera(R_final, t_final)
+    timings["floor"] = time.perf_counter() - clock
+
+    cameras = [
+        Camera(_K([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], R_final[v], t_final[v], e.width_px, e.height_px)
+        for v, e in enumerate(intrinsics)
+    ]
+    edges = np.zeros(V, int)
+    for p in pairs:
+        if p.support >= config.min_pair_support:
+            edges[[p.view_a, p.view_b]] += 1
+    per_view = pd.DataFrame({
+        "view": np.arange(V),
+        "focal_single_view_px": [e.fx_px for e in intrinsics],
+        "single_view_status": [e.status for e in intrinsics],
+        "focal_linear_px": f_linear,
+        "focal_px": ba.fx_px,
+        "focal_rel_std": ba.focal_rel_std,
+        "focal_status": np.where(ba.focal_rel_std <= config.max_focal_rel_std, "ok", "poorly_constrained"),
+        "focal_source": np.where([e.status == "ok" for e in intrinsics], "single_view+bundle",
+                                 np.where(blind, "resection+bundle", "linear+bundle")),
+        "reprojection_rms_px": ba.reprojection_rms_px,
+        "rotation_edges": edges,
+    })
+    bad = per_view[per_view["focal_status"] != "ok"]
+    if len(bad):
+        logger.warning("focal lengths of views %s are poorly constrained (relative std %s)", bad["view"].tolist(),
+                       np.round(bad["focal_rel_std"].to_numpy(), 3).tolist())
+    pair_table = pd.DataFrame({
+        "view_a": [p.view_a for p in pairs], "view_b": [p.view_b for p in pairs],
+        "support": [p.support for p in pairs], "residual_deg": residual_deg,
+    })
+    rows = np.concatenate(groups)
+    group_table = pd.DataFrame({
+        "frame": detections.frame[rows], "view": detections.view[rows], "det_id": detections.det_id[rows],
+        "group": np.repeat(np.arange(len(groups)), [len(g) for g in groups]),
+    })
+    diagnostics = ExtrinsicsDiagnostics(per_view, pair_table, group_table, floor, ba.inlier_fraction, timings)
+    logger.info("extrinsics: %d views, %d groups, timings %s", V, len(groups),
+                {k: round(v, 2) for k, v in timings.items()})
+    return ExtrinsicsEstimate(cameras, diagnostics)
+
+
+def _K(fx, fy, pp) -> np.ndarray:
+    fx, fy, pp = np.asarray(fx, float), np.asarray(fy, float), np.asarray(pp, float)
+    K = np.zeros((len(fx), 3, 3))
+    K[:, 0, 0], K[:, 1, 1], K[:, :2, 2], K[:, 2, 2] = fx, fy, pp, 1.0
+    return K

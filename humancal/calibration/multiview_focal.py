@@ -1,0 +1,388 @@
+"""Multi-view refinement of focal lengths and extrinsics: a bundle adjustment over matched people.
+
+Unknowns: per view the focal length(s) (log), a rotation increment and the translation (camera 0 keeps its
+rotation and translation: it is the world frame until the floor alignment); per group (one person in one
+frame, matched across views) the 3D positions of the 23 canonical keypoints.
+
+Residuals (all in units of their standard deviation):
+
+* reprojection of every detected keypoint, std ``max(1 %`` of the person's image size, 1 px) / sqrt(score);
+* agreement of each group's keypoints, relative to their hip midpoint and turned into each view's camera
+  frame, with that view's lifted pose (std ``shape_std_m``): this gives the metric scale (from body size)
+  and holds joints seen in one view only;
+* optional priors on the log focal lengths (from the single-view estimates, weighted by their uncertainty).
+
+Reprojection and shape residuals are robustified with Huber weights (iteratively reweighted). The solver is
+Levenberg-Marquardt on the normal equations with the Schur complement over the per-group point blocks, so
+the cost grows linearly with the number of groups. Unlike the linear solve of :mod:`.translations`, the noisy
+measurements (2D keypoints, lifted poses) are residuals here, not regressors, so the focal lengths are not
+biased by errors in variables.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from humancal.calibration.types import LiftedPoses
+from humancal.detections import DenseDetections
+from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
+
+__all__ = ["BundleResult", "bundle_adjust", "rotvec_to_rotmat"]
+
+logger = logging.getLogger(__name__)
+
+_LHIP, _RHIP = JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]
+
+
+@dataclass(frozen=True)
+class BundleResult:
+    """Result of :func:`bundle_adjust`.
+
+    Attributes:
+        fx_px, fy_px: (V,) focal lengths, pixels.
+        R_cam_from_world: (V, 3, 3) rotations.
+        t_cam_from_world_m: (V, 3) translations, metres.
+        points_world_m: (G, 23, 3) keypoints of the groups, metres.
+        focal_rel_std: (V,) relative standard deviation of the focal lengths (inverse Schur complement).
+        reprojection_rms_px: (V,) RMS reprojection error of the inlier keypoints per view, pixels.
+        inlier_fraction: fraction of keypoint observations within the Huber threshold.
+        iterations: LM iterations run.
+        converged: whether the relative cost decrease fell under the tolerance.
+    """
+
+    fx_px: np.ndarray
+    fy_px: np.ndarray
+    R_cam_from_world: np.ndarray
+    t_cam_from_world_m: np.ndarray
+    points_world_m: np.ndarray
+    focal_rel_std: np.ndarray
+    reprojection_rms_px: np.ndarray
+    inlier_fraction: float
+    iterations: int
+    converged: bool
+
+
+def rotvec_to_rotmat(rotvec: np.ndarray) -> np.ndarray:
+    """(..., 3) rotation vectors to (..., 3, 3) matrices (Rodrigues)."""
+    rotvec = np.asarray(rotvec, dtype=np.float64)
+    angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    axis = rotvec / np.where(angle > 1e-12, angle, 1.0)
+    K = _skew(axis)
+    s, c = np.sin(angle)[..., None], np.cos(angle)[..., None]
+    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    K = np.zeros(v.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
+    return K
+
+
+@dataclass
+class _Problem:
+    V: int
+    G: int
+    square: bool
+    # reprojection observations
+    o_group: np.ndarray
+    o_view: np.ndarray
+    o_joint: np.ndarray
+    o_px: np.ndarray  # (O, 2) relative to the principal point
+    o_w: np.ndarray  # (O,) 1 / std
+    # shape observations: one lifted pose per (group, detection)
+    s_group: np.ndarray
+    s_view: np.ndarray
+    s_joints: np.ndarray  # (S, 23, 3)
+    shape_w: float
+    # focal priors
+    prior_log_f: np.ndarray  # (V,)
+    prior_w: np.ndarray  # (V,), 0 for none
+    huber: float
+
+
+def _camera_params(p: _Problem) -> int:
+    return (1 if p.square else 2) + 6
+
+
+def _unpack(p: _Problem, cams: np.ndarray, R0: np.ndarray):
+    nf = 1 if p.square else 2
+    fx = np.exp(cams[:, 0])
+    fy = fx if p.square else np.exp(cams[:, 1])
+    R = rotvec_to_rotmat(cams[:, nf : nf + 3]) @ R0
+    t = cams[:, nf + 3 : nf + 6]
+    return fx, fy, R, t
+
+
+def _residuals(p: _Problem, cams, R0, X):
+    """Reprojection (O, 2), shape (S, 23, 3), prior (V,) residuals, all whitened."""
+    fx, fy, R, t = _unpack(p, cams, R0)
+    P = np.einsum("oij,oj->oi", R[p.o_view], X[p.o_group, p.o_joint]) + t[p.o_view]
+    z = P[:, 2]
+    proj = np.stack([fx[p.o_view] * P[:, 0] / z, fy[p.o_view] * P[:, 1] / z], -1)
+    r_obs = (proj - p.o_px) * p.o_w[:, None]
+    r_obs[z <= 1e-6] = 1e3  # behind the camera
+    rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
+    r_shape = (rel @ R[p.s_view].transpose(0, 2, 1) - p.s_joints) * p.shape_w
+    nf = 1 if p.square else 2
+    r_prior = (cams[:, :nf].mean(1) - p.prior_log_f) * p.prior_w
+    return r_obs, r_shape, r_prior, (fx, fy, R, t, P)
+
+
+def _huber_weights(norms: np.ndarray, k: float) -> np.ndarray:
+    return np.where(norms <= k, 1.0, k / np.maximum(norms, 1e-12))
+
+
+def _robust_cost(r_obs, r_shape, r_prior, k):
+    def rho(n):
+        return np.where(n <= k, n**2, 2 * k * n - k**2)
+
+    return float(rho(np.linalg.norm(r_obs, axis=1)).sum() + rho(np.linalg.norm(r_shape, axis=2)).sum()
+                 + (r_prior**2).sum())
+
+
+def _scatter_blocks(target: np.ndarray, index: np.ndarray, blocks: np.ndarray) -> None:
+    """``target[index[s]] += blocks[s]`` with repeated indices summed (bincount over flat positions)."""
+    size = int(np.prod(target.shape[1:]))
+    flat = index[:, None] * size + np.arange(size)
+    target += np.bincount(flat.ravel(), blocks.reshape(len(index), -1).ravel(), minlength=target.size).reshape(
+        target.shape)
+
+
+def _normal_equations(p: _Problem, cams, R0, X, free_cam):
+    """Gauss-Newton blocks: Hcc (V, nc, nc), Hcp (G, V, nc, 3J), Hpp (G, 3J, 3J), gc (V, nc), gp (G, 3J)."""
+    nc = _camera_params(p)
+    nf = 1 if p.square else 2
+    J3 = 3 * NUM_JOINTS
+    r_obs, r_shape, r_prior, (fx, fy, R, t, P) = _residuals(p, cams, R0, X)
+    w_obs = _huber_weights(np.linalg.norm(r_obs, axis=1), p.huber)
+    w_shape = _huber_weights(np.linalg.norm(r_shape, axis=2), p.huber)  # (S, 23)
+
+    # --- reprojection: d r / d P (2x3), then chain to camera and point parameters
+    v, O = p.o_view, len(p.o_view)
+    z = P[:, 2]
+    dP = np.zeros((O, 2, 3))
+    dP[:, 0, 0] = fx[v] / z
+    dP[:, 0, 2] = -fx[v] * P[:, 0] / z**2
+    dP[:, 1, 1] = fy[v] / z
+    dP[:, 1, 2] = -fy[v] * P[:, 1] / z**2
+    scale = (p.o_w * np.sqrt(w_obs))[:, None, None]
+    dP *= scale
+    Jc = np.zeros((O, 2, nc))
+    if p.square:
+        Jc[:, 0, 0] = fx[v] * P[:, 0] / z * scale[:, 0, 0]
+        Jc[:, 1, 0] = fy[v] * P[:, 1] / z * scale[:, 0, 0]
+    else:
+        Jc[:, 0, 0] = fx[v] * P[:, 0] / z * scale[:, 0, 0]
+        Jc[:, 1, 1] = fy[v] * P[:, 1] / z * scale[:, 0, 0]
+    RX = P - t[v]
+    Jc[:, :, nf : nf + 3] = -dP @ _skew(RX)
+    Jc[:, :, nf + 3 : nf + 6] = dP
+    Jp = dP @ R[v]  # (O, 2, 3)
+    r = r_obs * np.sqrt(w_obs)[:, None]
+
+    Hcc = np.zeros((p.V, nc, nc))
+    _scatter_blocks(Hcc, v, Jc.transpose(0, 2, 1) @ Jc)
+    gc = np.zeros((p.V, nc))
+    _scatter_blocks(gc, v, np.einsum("ori,or->oi", Jc, r))
+    Hcp = np.zeros((p.G, p.V, nc, J3))
+    cols = 3 * p.o_joint[:, None] + np.arange(3)
+    blk = Jc.transpose(0, 2, 1) @ Jp  # (O, nc, 3)
+    flat = ((p.o_group * p.V + v)[:, None, None] * nc + np.arange(nc)[None, :, None]) * J3 + cols[:, None, :]
+    Hcp += np.bincount(flat.ravel(), blk.ravel(), minlength=Hcp.size).reshape(Hcp.shape)
+    Hpp = np.zeros((p.G, J3, J3))
+    pp = Jp.transpose(0, 2, 1) @ Jp
+    flat = (p.o_group[:, None, None] * J3 + cols[:, :, None]) * J3 + cols[:, None, :]
+    Hpp += np.bincount(flat.ravel(), pp.ravel(), minlength=p.G * J3 * J3).reshape(p.G, J3, J3)
+    gp = np.bincount((p.o_group[:, None] * J3 + cols).ravel(), np.einsum("ori,or->oi", Jp, r).ravel(),
+                     minlength=p.G * J3).reshape(p.G, J3)
+
+    # --- shape: r_k = w_k (R_v (X_k - (X_lh + X_rh)/2) - L_k); d r_k / d X_m = w_k R_v D[k, m] with
+    # D = I - 1 c^T (c = 1/2 at both hips). R_v^T R_v = I makes the point block (D^T W^2 D) kron I_3.
+    sv, S = p.s_view, len(p.s_view)
+    ws = p.shape_w * np.sqrt(w_shape)  # (S, 23)
+    Rs = R[sv]
+    rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
+    Rrel = rel @ Rs.transpose(0, 2, 1)
+    rs = r_shape * np.sqrt(w_shape)[..., None]
+    c = np.zeros(NUM_JOINTS)
+    c[[_LHIP, _RHIP]] = 0.5
+    # camera (rotation) part: d(R rel)/d omega = -[R rel]x
+    Jsc = -_skew(Rrel) * ws[..., None, None]  # (S, 23, 3, 3)
+    Hcc_rot = np.zeros((p.V, 3, 3))
+    _scatter_blocks(Hcc_rot, sv, np.einsum("skri,skrj->sij", Jsc, Jsc))
+    Hcc[:, nf : nf + 3, nf : nf + 3] += Hcc_rot
+    gc_rot = np.zeros((p.V, 3))
+    _scatter_blocks(gc_rot, sv, np.einsum("skri,skr->si", Jsc, rs))
+    gc[:, nf : nf + 3] += gc_rot
+    w2 = ws**2
+    sw2 = w2.sum(1)
+    M = (np.eye(NUM_JOINTS)[None] * w2[:, :, None] - c[None, :, None] * w2[:, None, :] - w2[:, :, None] * c[None, None, :]
+         + sw2[:, None, None] * np.outer(c, c)[None])  # (S, 23, 23) = D^T W^2 D
+    M_group = np.zeros((p.G, NUM_JOINTS, NUM_JOINTS))
+    _scatter_blocks(M_group, p.s_group, M)
+    Hpp += (M_group[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]).reshape(p.G, J3, J3)
+    y = ws[..., None] * (rs @ Rs)  # w_k R^T r_k
+    _scatter_blocks(gp, p.s_group, (y - c[None, :, None] * y.sum(1, keepdims=True)).reshape(S, J3))
+    Z = ws[..., None, None] * np.einsum("skri,sra->skia", Jsc, Rs)  # (S, 23, 3, 3): Jsc_k^T w_k R
+    cross = Z - c[None, :, None, None] * Z.sum(1, keepdims=True)  # (S, 23(m), 3(i), 3(a))
+    Hcp_rot = np.zeros((p.G, p.V, 3, J3))
+    _scatter_blocks(Hcp_rot.reshape(p.G * p.V, 3, J3), p.s_group * p.V + sv, cross.transpose(0, 2, 1, 3).reshape(S, 3, J3))
+    Hcp[:, :, nf : nf + 3, :] += Hcp_rot
+
+    # --- focal priors
+    for vv in range(p.V):
+        if p.prior_w[vv] > 0:
+            jf = np.full(nf, p.prior_w[vv] / nf)
+            Hcc[vv, :nf, :nf] += np.outer(jf, jf)
+            gc[vv, :nf] += jf * r_prior[vv]
+    # fixed camera parameters
+    Hcc[~free_cam] = 0.0
+    Hcc = Hcc.copy()
+    for vv in range(p.V):
+        fixed = ~free_cam[vv]
+        Hcc[vv][:, fixed] = 0.0
+        Hcc[vv][fixed, fixed] = 1.0
+    gc[~free_cam] = 0.0
+    Hcp[:, ~free_cam] = 0.0
+    return Hcc, Hcp, Hpp, gc, gp, _robust_cost(r_obs, r_shape, r_prior, p.huber), w_obs
+
+
+def _solve(Hcc, Hcp, Hpp, gc, gp, lam):
+    V, nc = gc.shape
+    G, J3 = gp.shape
+    n = V * nc
+    Hpp_d = Hpp + lam * (np.diagonal(Hpp, axis1=1, axis2=2)[..., None] * np.eye(J3) + 1e-9 * np.eye(J3))
+    Hpp_inv = np.linalg.inv(Hpp_d)
+    B = Hcp.reshape(G, n, J3)
+    S = np.zeros((n, n))
+    for v in range(V):
+        S[v * nc : (v + 1) * nc, v * nc : (v + 1) * nc] = Hcc[v]
+    S += lam * np.diag(np.maximum(np.diag(S), 1e-12))
+    BHi = B @ Hpp_inv  # (G, n, J3)
+    S -= BHi.transpose(1, 0, 2).reshape(n, G * J3) @ B.transpose(1, 0, 2).reshape(n, G * J3).T
+    rhs = -gc.reshape(n) + np.einsum("gnj,gj->n", BHi, gp)
+    dc = np.linalg.solve(S + 1e-12 * np.eye(n), rhs)
+    dp = -np.einsum("gij,gj->gi", Hpp_inv, gp + np.einsum("gnj,n->gj", B, dc))
+    return dc.reshape(V, nc), dp.reshape(G, NUM_JOINTS, 3), S
+
+
+def bundle_adjust(
+    detections: DenseDetections,
+    lifted: LiftedPoses,
+    groups: list[np.ndarray],
+    points_world_m: np.ndarray,
+    fx_px: np.ndarray,
+    fy_px: np.ndarray,
+    principal_point_px: np.ndarray,
+    R_cam_from_world: np.ndarray,
+    t_cam_from_world_m: np.ndarray,
+    *,
+    square_pixels: bool = True,
+    focal_prior_px: np.ndarray | None = None,
+    focal_prior_rel_std: np.ndarray | None = None,
+    shape_std_m: float = 0.1,
+    min_score: float = 0.2,
+    huber: float = 2.5,
+    max_iterations: int = 40,
+    tolerance: float = 1e-6,
+) -> BundleResult:
+    """Refine focal lengths, rotations, translations and the groups' keypoints (see the module docstring).
+
+    Args:
+        detections: all detections.
+        lifted: their lifted poses.
+        groups: G arrays of detection rows, each one person in one frame (one detection per view).
+        points_world_m: (G, 23, 3) initial keypoints of the groups, world metres.
+        fx_px, fy_px: (V,) initial focal lengths.
+        principal_point_px: (V, 2) principal points (fixed).
+        R_cam_from_world, t_cam_from_world_m: (V, 3, 3), (V, 3) initial extrinsics; camera 0 stays fixed.
+        square_pixels: one focal per view (fx = fy) when True.
+        focal_prior_px, focal_prior_rel_std: (V,) optional priors on the focal lengths (``inf`` std: none).
+        shape_std_m: std of the lifted poses' joints (per coordinate), metres.
+        min_score: keypoints below this 2D confidence are not used.
+        huber: Huber threshold in standard deviations.
+        max_iterations: LM iterations.
+        tolerance: stop when the relative cost decrease is below this.
+
+    Returns:
+        :class:`BundleResult`.
+    """
+    V, G = len(fx_px), len(groups)
+    pp = np.asarray(principal_point_px, dtype=np.float64)
+    rows = np.concatenate(groups)
+    grp = np.repeat(np.arange(G), [len(g) for g in groups])
+    sc = detections.scores[rows]
+    kp = detections.keypoints_px[rows]
+    size = np.nanmax(np.linalg.norm(kp - np.nanmean(kp, 1, keepdims=True), axis=-1), axis=1)
+    sigma_px = np.maximum(0.01 * 2.0 * size, 1.0)  # size ~ half the body extent
+    ok = (sc >= min_score) & np.isfinite(kp).all(-1)
+    d_idx, j_idx = np.nonzero(ok)
+    view = detections.view[rows]
+    prior_f = np.zeros(V) if focal_prior_px is None else np.log(np.asarray(focal_prior_px, dtype=np.float64))
+    prior_std = np.full(V, np.inf) if focal_prior_rel_std is None else np.asarray(focal_prior_rel_std, float)
+    prior_w = np.where(np.isfinite(prior_std) & np.isfinite(prior_f), 1.0 / np.maximum(prior_std, 1e-3), 0.0)
+    prob = _Problem(
+        V=V, G=G, square=square_pixels,
+        o_group=grp[d_idx], o_view=view[d_idx], o_joint=j_idx,
+        o_px=kp[d_idx, j_idx] - pp[view[d_idx]],
+        o_w=np.sqrt(sc[d_idx, j_idx]) / sigma_px[d_idx],
+        s_group=grp, s_view=view, s_joints=lifted.joints_cam_m[rows], shape_w=1.0 / shape_std_m,
+        prior_log_f=np.nan_to_num(prior_f), prior_w=prior_w, huber=huber,
+    )
+    nf = 1 if square_pixels else 2
+    nc = nf + 6
+    cams = np.zeros((V, nc))
+    cams[:, 0] = np.log(fx_px)
+    if not square_pixels:
+        cams[:, 1] = np.log(fy_px)
+    elif not np.allclose(fx_px, fy_px):
+        cams[:, 0] = 0.5 * (np.log(fx_px) + np.log(fy_px))
+    cams[:, nf + 3 :] = t_cam_from_world_m
+    R0 = np.asarray(R_cam_from_world, dtype=np.float64).copy()
+    X = np.asarray(points_world_m, dtype=np.float64).copy()
+    free = np.ones((V, nc), bool)
+    free[0, nf:] = False
+
+    lam, converged, it = 1e-3, False, 0
+    Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, free)
+    for it in range(1, max_iterations + 1):
+        improved = False
+        for _ in range(10):
+            dc, dp, S = _solve(Hcc, Hcp, Hpp, gc, gp, lam)
+            new_cams, new_X = cams + dc, X + dp
+            # fold the rotation increment into R0 so the increment parameters stay near zero
+            r_obs, r_shape, r_prior, _ = _residuals(prob, new_cams, R0, new_X)
+            new_cost = _robust_cost(r_obs, r_shape, r_prior, huber)
+            if np.isfinite(new_cost) and new_cost < cost:
+                improved = True
+                break
+            lam *= 10.0
+        if not improved:
+            converged = True
+            break
+        R0 = rotvec_to_rotmat(new_cams[:, nf : nf + 3]) @ R0
+        new_cams[:, nf : nf + 3] = 0.0
+        cams, X = new_cams, new_X
+        lam = max(lam / 5.0, 1e-7)
+        old = cost
+        Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, free)
+        if (old - cost) / max(old, 1e-12) < tolerance:
+            converged = True
+            break
+    _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
+    cov = np.linalg.pinv(S)
+    f_var = np.array([cov[v * nc, v * nc] for v in range(V)])
+    fx, fy, R, t = _unpack(prob, cams, R0)
+    r_obs, _, _, _ = _residuals(prob, cams, R0, X)
+    err_px = np.linalg.norm(r_obs / prob.o_w[:, None], axis=1)
+    inl = w_obs >= 1.0
+    rms = np.array([np.sqrt(np.mean(err_px[(prob.o_view == v) & inl] ** 2)) if np.any((prob.o_view == v) & inl)
+                    else np.nan for v in range(V)])
+    logger.info("bundle adjustment: %d groups, %d keypoints, %d iterations, cost %.4g, rms %s px", G, len(err_px), it,
+                cost, np.round(rms, 2))
+    return BundleResult(fx, fy, R, t, X, np.sqrt(np.maximum(f_var, 0.0)), rms, float(inl.mean()), it, converged)

@@ -1,0 +1,60 @@
+"""Synthetic scenes with stand-in lifted poses, shared by the calibration tests (built once per module)."""
+
+import numpy as np
+import pytest
+
+from humancal.camera import Camera
+from humancal.detections import DenseDetections
+
+
+@pytest.fixture(scope="session")
+def ring_scene(body_model):
+    """3 people, 4 views on a ring, 60 frames, default detector noise."""
+    from humancal.synthetic import generate_scene, preset
+
+    return generate_scene(preset("demo", num_people=3, num_views=4, num_frames=60, seed=11), body_model,
+                          sequence="ring")
+
+
+@pytest.fixture(scope="session")
+def ring_stand_in(ring_scene):
+    from humancal.calibration.stand_in import stand_in_lifted_poses
+
+    return stand_in_lifted_poses(ring_scene, np.random.default_rng(0))
+
+
+@pytest.fixture(scope="session")
+def simulate_views():
+    """The :func:`simulate` helper."""
+    return simulate
+
+
+@pytest.fixture(scope="session")
+def down_camera():
+    """The :func:`look_down_camera` helper."""
+    return look_down_camera
+
+
+def simulate(scene, cameras: list[Camera], seed: int = 1):
+    """Detections of ``scene``'s people seen by other ``cameras`` (the scene's noise model), with stand-in lifts.
+
+    Returns:
+        (DenseDetections, LiftedPoses, person_id)
+    """
+    from humancal.calibration.stand_in import lift_ground_truth
+    from humancal.synthetic import simulate_detections
+
+    out = simulate_detections(scene.keypoints_world_m, scene.height_m, cameras, scene.config.noise,
+                              np.random.default_rng(seed))
+    kp = np.where(out.present[..., None], out.keypoints_px, np.nan)
+    dense = DenseDetections(out.frame, out.view, np.arange(len(out.frame)), kp, out.scores)
+    lifted = lift_ground_truth(scene.keypoints_world_m, scene.height_m, cameras, out.frame, out.view, out.person_id,
+                               out.flipped, np.random.default_rng(seed + 1))
+    return dense, lifted, out.person_id
+
+
+def look_down_camera(center_world_m, focal_px=1000.0, size=(1920, 1080)) -> Camera:
+    """A camera looking straight down (image x = world x, image y = world -y)."""
+    K = np.array([[focal_px, 0.0, size[0] / 2], [0.0, focal_px, size[1] / 2], [0.0, 0.0, 1.0]])
+    R = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+    return Camera.from_center(K, R, np.asarray(center_world_m, float), *size)

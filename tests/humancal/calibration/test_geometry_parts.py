@@ -1,0 +1,117 @@
+"""Bundle adjustment, floor alignment, similarity alignment, the stand-in lifter and the rig plot."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from humancal.calibration import CalibrationError, align_rig, align_to_floor, plot_rigs, umeyama
+from humancal.calibration.multiview_focal import bundle_adjust, rotvec_to_rotmat
+from humancal.calibration.stand_in import lift_ground_truth, upright_scores
+from humancal.camera import Camera, project_points
+
+
+def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in):
+    d, lifted, pid = ring_stand_in.detections, ring_stand_in.lifted, ring_stand_in.person_id
+    rig = list(ring_scene.rig)
+    V = len(rig)
+    # groups = true identities (one person in one frame seen by >= 2 views), every 3rd frame
+    keys = {}
+    for row in np.flatnonzero(pid >= 0):
+        if d.frame[row] % 3 == 0:
+            keys.setdefault((d.frame[row], pid[row]), []).append(row)
+    groups = [np.array(g) for g in keys.values() if len(g) >= 2]
+    points = np.stack([ring_scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
+    rng = np.random.default_rng(0)
+    R_true = np.stack([c.R_cam_from_world for c in rig])
+    t_true = np.stack([c.t_cam_from_world_m for c in rig])
+    f_true = np.array([c.K[0, 0] for c in rig])
+    R0 = rotvec_to_rotmat(np.radians(2.0) * rng.normal(size=(V, 3))) @ R_true
+    R0[0] = R_true[0]
+    t0 = t_true + 0.2 * rng.normal(size=(V, 3))
+    t0[0] = t_true[0]
+    f0 = f_true * np.array([1.0, 1.15, 0.85, 1.1])
+    pp = np.stack([c.K[:2, 2] for c in rig])
+    res = bundle_adjust(d, lifted, groups, points + 0.05 * rng.normal(size=points.shape), f0, f0, pp, R0, t0)
+    assert np.all(np.abs(res.fx_px / f_true - 1) < 0.02), res.fx_px / f_true
+    centres = -np.einsum("vji,vj->vi", res.R_cam_from_world, res.t_cam_from_world_m)
+    true_centres = np.stack([c.center_world_m for c in rig])
+    assert np.linalg.norm(centres - true_centres, axis=1).max() < 0.1  # scale from the noisy lifted shapes
+    assert np.all(res.reprojection_rms_px < 8) and res.inlier_fraction > 0.9
+    assert np.all(res.focal_rel_std < 0.02)
+
+
+def test_floor_alignment_of_a_tilted_world(ring_scene):
+    X = ring_scene.keypoints_world_m[:, ::3].reshape(-1, 23, 3)
+    upright = upright_scores(X)
+    Q = Rotation.from_euler("xyz", [25, -10, 70], degrees=True).as_matrix()
+    shift = np.array([1.0, -2.0, 3.0])
+    old = X @ Q.T + shift  # the same people in another frame
+    R_cam0 = Q @ ring_scene.rig[0].R_cam_from_world.T  # any rotation; sets the x axis only
+    floor = align_to_floor(old, upright, R_cam0.T)
+    new = (old - floor.origin_old_m) @ floor.Q_new_from_old.T
+    up = floor.Q_new_from_old @ (Q @ [0, 0, 1.0])
+    assert np.degrees(np.arccos(up[2])) < 0.3
+    assert floor.up_source == "floor_plane"
+    soles = new[upright >= 0.5][:, 17:].min(1)[:, 2]
+    assert abs(np.median(soles)) < 0.01
+    assert np.isclose(np.linalg.det(floor.Q_new_from_old), 1.0)
+    with pytest.raises(CalibrationError, match="standing people"):
+        align_to_floor(old[:3], upright[:3], R_cam0.T)
+
+
+def test_umeyama_and_rig_alignment(ring_scene):
+    rng = np.random.default_rng(1)
+    src = rng.normal(size=(10, 3))
+    R = Rotation.random(random_state=2).as_matrix()
+    sim = umeyama(src, 2.5 * src @ R.T + [1, 2, 3])
+    assert np.isclose(sim.scale, 2.5) and np.allclose(sim.R, R) and np.allclose(sim.t, [1, 2, 3])
+    # a rig moved by a similarity is aligned back exactly and keeps its images
+    rig = list(ring_scene.rig)[:2]  # two cameras: optical-axis points fix the baseline rotation
+    inv = umeyama(np.eye(3), np.eye(3) * 0.5 @ R.T)  # scale 0.5, rotation R, translation 0
+    moved = [inv.apply_to_camera(c) for c in rig]
+    back = align_rig(moved, rig)
+    for m, c in zip(moved, rig):
+        a = back.apply_to_camera(m)
+        assert np.allclose(a.center_world_m, c.center_world_m, atol=1e-6)
+        assert np.allclose(a.R_cam_from_world, c.R_cam_from_world, atol=1e-6)
+    X = rng.uniform(-1, 1, size=(5, 3)) + [0, 0, 1]
+    assert np.allclose(project_points(moved[0], inv.apply(X))[0], project_points(rig[0], X)[0], atol=1e-6)
+
+
+def test_stand_in_without_noise_is_the_truth(ring_scene, ring_stand_in):
+    d, pid = ring_stand_in.detections, ring_stand_in.person_id
+    true = np.flatnonzero(pid >= 0)[:50]
+    flipped = np.zeros(len(true), bool)
+    lifted = lift_ground_truth(ring_scene.keypoints_world_m, ring_scene.height_m, ring_scene.rig, d.frame[true],
+                               d.view[true], pid[true], flipped, np.random.default_rng(0), joint_noise_m=0.0,
+                               height_noise_m=0.0, rotation_noise_deg=0.0, depth_flip_rate=0.0)
+    cam = ring_scene.rig
+    for k, row in enumerate(true):
+        X = ring_scene.keypoints_world_m[pid[row], d.frame[row]]
+        Xc = X @ cam[d.view[row]].R_cam_from_world.T
+        Xc -= 0.5 * (Xc[11] + Xc[12])
+        assert np.allclose(lifted.joints_cam_m[k], Xc, atol=1e-9)
+    assert np.allclose(lifted.height_m, ring_scene.height_m[pid[true]])
+    # noisy stand-in: errors of the requested size
+    noisy = ring_stand_in.lifted.joints_cam_m[true]
+    err = np.linalg.norm(noisy - lifted.joints_cam_m, axis=-1)
+    assert 0.03 < np.median(err) < 0.12
+
+
+def test_upright_scores_separate_standing_from_crouching(ring_scene):
+    from humancal.synthetic import ACTIVITIES
+
+    codes = {name: i for i, name in enumerate(ACTIVITIES)}
+    X, act = ring_scene.keypoints_world_m, ring_scene.activity
+    score = upright_scores(X.reshape(-1, 23, 3)).reshape(act.shape)
+    if (act == codes["stand"]).any() and (act == codes["crouch"]).any():
+        assert score[act == codes["stand"]].mean() > 0.6 > score[act == codes["crouch"]].mean()
+    assert score.min() >= 0 and score.max() <= 1
+
+
+def test_plot_rigs_writes_a_png(tmp_path, ring_scene):
+    rig = list(ring_scene.rig)
+    moved = [Camera.from_center(c.K, c.R_cam_from_world, c.center_world_m + 0.1, c.width_px, c.height_px) for c in rig]
+    path = plot_rigs(moved, rig, np.random.default_rng(0).uniform(-2, 2, (50, 3)) * [1, 1, 0], tmp_path / "rigs.png")
+    assert path.exists() and path.stat().st_size > 10_000
+    assert plot_rigs(rig, None, None, tmp_path / "alone.png").exists()
