@@ -4,20 +4,13 @@
 import dagster as dg
 import pandas as pd
 
-from assets.common import UPDATE_CONDITION, table_metadata, table_output
+from assets.common import sequence_asset, table_output
 from humancal.baselines import triangulate_identified
 from humancal.camera import cameras_from_table
-from pipelines.partitions import SEQUENCES
 from resources.datasets import DatasetsResource
 
 
-@dg.asset(
-    partitions_def=SEQUENCES,
-    group_name="sequence",
-    metadata=table_metadata("poses3d"),
-    code_version="1",
-    automation_condition=UPDATE_CONDITION,
-)
+@sequence_asset("poses3d", code_version="1")
 def gt_camera_triangulation(
     context: dg.AssetExecutionContext,
     datasets: DatasetsResource,

@@ -9,6 +9,7 @@ import pandas as pd
 import pyarrow as pa
 
 from humancal.tables import to_arrow
+from pipelines.partitions import SEQUENCES
 from resources.io_managers import TABLE_METADATA_KEY
 
 AC = dg.AutomationCondition
@@ -30,6 +31,18 @@ REQUIRES_DATA_KEY = "humancal/requires_data"
 def table_metadata(name: str) -> dict[str, str]:
     """Asset metadata declaring that an asset holds canonical table ``name``."""
     return {TABLE_METADATA_KEY: name}
+
+
+def sequence_asset(table: str, code_version: str, **kwargs):
+    """``@dg.asset`` for a per-sequence table: partitioned by sequence, group ``sequence``, the update condition."""
+    return dg.asset(
+        partitions_def=SEQUENCES,
+        group_name="sequence",
+        metadata=table_metadata(table),
+        code_version=code_version,
+        automation_condition=UPDATE_CONDITION,
+        **kwargs,
+    )
 
 
 def table_data_version(df: pd.DataFrame, name: str) -> dg.DataVersion:

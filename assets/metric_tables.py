@@ -4,20 +4,13 @@
 import dagster as dg
 import pandas as pd
 
-from assets.common import UPDATE_CONDITION, table_metadata, table_output
+from assets.common import sequence_asset, table_output
 from evaluation.sequence_metrics import sequence_metric_table
 from humancal.camera import cameras_from_table
-from pipelines.partitions import SEQUENCES
 from resources.datasets import DatasetsResource
 
 
-@dg.asset(
-    partitions_def=SEQUENCES,
-    group_name="sequence",
-    metadata=table_metadata("metrics"),
-    code_version="1",
-    automation_condition=UPDATE_CONDITION,
-)
+@sequence_asset("metrics", code_version="2")
 def metric_tables(
     context: dg.AssetExecutionContext,
     datasets: DatasetsResource,
