@@ -1,8 +1,10 @@
 """What every humancal asset shares: the automation condition, content data versions, table metadata."""
 
 
+import base64
 import hashlib
 import warnings
+from pathlib import Path
 
 import dagster as dg
 import pandas as pd
@@ -54,9 +56,20 @@ def table_data_version(df: pd.DataFrame, name: str) -> dg.DataVersion:
     return dg.DataVersion(hashlib.sha256(sink.getvalue().to_pybytes()).hexdigest()[:16])
 
 
-def table_output(df: pd.DataFrame, name: str, output_name: str = "result", **metadata) -> dg.Output:
-    """An Output carrying a content data version and summary metadata."""
+def versioned_output(value, data_version: str, output_name: str = "result", **metadata) -> dg.Output:
+    """An Output carrying the given data version (a content digest) and metadata."""
     with warnings.catch_warnings():
         # Output(data_version=...) is marked beta; the pinned dagster version is what we test against.
         warnings.simplefilter("ignore", dg.BetaWarning)
-        return dg.Output(df, output_name=output_name, data_version=table_data_version(df, name), metadata=metadata)
+        return dg.Output(value, output_name=output_name, data_version=dg.DataVersion(data_version), metadata=metadata)
+
+
+def table_output(df: pd.DataFrame, name: str, output_name: str = "result", **metadata) -> dg.Output:
+    """An Output carrying a content data version and summary metadata."""
+    return versioned_output(df, table_data_version(df, name).value, output_name, **metadata)
+
+
+def png_metadata(path: Path, alt: str) -> dg.MetadataValue:
+    """A PNG file as Markdown metadata (an inline image the Dagster UI shows on the asset page)."""
+    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    return dg.MetadataValue.md(f"![{alt}](data:image/png;base64,{data})")

@@ -1,12 +1,11 @@
 """Shared by all sequences: CMU mocap retargeted onto the body model."""
 
-import base64
 import tempfile
 from pathlib import Path
 
 import dagster as dg
 
-from assets.common import REQUIRES_DATA_KEY, UPDATE_CONDITION, table_metadata, table_output
+from assets.common import REQUIRES_DATA_KEY, UPDATE_CONDITION, png_metadata, table_metadata, table_output
 from humancal.mocap import read_bvh
 from humancal.retarget import RetargetConfig, clips_to_motions_table, plot_retarget, pooled_residual_mm, residual_summary, retarget_clips
 from resources.body_model import BodyModelResource
@@ -14,11 +13,6 @@ from resources.datasets import DatasetsResource
 
 PLOT_CLIP = "02_01"
 """Clip drawn in the metadata picture (a walk)."""
-
-
-def _png_markdown(path: Path) -> dg.MetadataValue:
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return dg.MetadataValue.md(f"![retarget](data:image/png;base64,{data})")
 
 
 @dg.asset(
@@ -55,7 +49,7 @@ def mocap_clips(context: dg.AssetExecutionContext, body_model: BodyModelResource
     source = next(p for p in paths if p.name.startswith(shown.name))
     with tempfile.TemporaryDirectory() as tmp:
         png = plot_retarget(read_bvh(source), shown, [0, len(shown.root_translation_m) // 2], Path(tmp) / "retarget.png")
-        metadata["picture"] = _png_markdown(png)
+        metadata["picture"] = png_metadata(png, "retarget")
     table = clips_to_motions_table(clips)
     context.log.info(f"residual median {pooled['median_mm']:.1f} mm, p95 {pooled['p95_mm']:.1f} mm over {len(clips)} clips")
     return table_output(table, "motions", **metadata)

@@ -7,6 +7,9 @@ the column names.
 
 Tables:
     detections:   2D keypoints of detected people, one row per (frame, view, det_id, joint).
+    lifted_detections: detections with the lifter's 3D pose of each, one row per (frame, view, det_id, joint)
+                  for all 23 joints (x_px/y_px NaN and score 0 where the joint was not detected).
+    intrinsics:   one row per view: the initial intrinsics from upright people, with diagnostics.
     views:        one row per view: name and image size (what a user knows without calibration).
     poses3d:      3D keypoints of people in the world frame, one row per (frame, person_id, joint).
     cameras:      one row per view: pinhole intrinsics, world-to-camera extrinsics, image size.
@@ -40,6 +43,52 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("x_px", pa.float64()),
             ("y_px", pa.float64()),
             ("score", pa.float64()),
+        ]
+    ),
+    "lifted_detections": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("frame", pa.int32()),
+            ("view", pa.int32()),
+            ("det_id", pa.int32()),
+            ("joint", pa.string()),
+            ("x_px", pa.float64()),
+            ("y_px", pa.float64()),
+            ("score", pa.float64()),
+            ("x_crop_m", pa.float64()),
+            ("y_crop_m", pa.float64()),
+            ("z_crop_m", pa.float64()),
+            ("box_cx_px", pa.float64()),
+            ("box_cy_px", pa.float64()),
+            ("height_m", pa.float64()),
+            ("upright_score", pa.float64()),
+            ("lifted", pa.bool_()),
+        ]
+    ),
+    "intrinsics": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("view", pa.int32()),
+            ("fx_px", pa.float64()),
+            ("fy_px", pa.float64()),
+            ("cx_px", pa.float64()),
+            ("cy_px", pa.float64()),
+            ("width_px", pa.int32()),
+            ("height_px", pa.int32()),
+            ("status", pa.string()),
+            ("focal_rel_uncertainty", pa.float64()),
+            ("num_candidates", pa.int32()),
+            ("num_inliers", pa.int32()),
+            ("vanishing_x_px", pa.float64()),
+            ("vanishing_y_px", pa.float64()),
+            ("up_x", pa.float64()),
+            ("up_y", pa.float64()),
+            ("up_z", pa.float64()),
+            ("tilt_deg", pa.float64()),
+            ("roll_deg", pa.float64()),
+            ("camera_height_m", pa.float64()),
+            ("vp_rms_px", pa.float64()),
+            ("rms_px", pa.float64()),
         ]
     ),
     "views": pa.schema(
@@ -202,7 +251,7 @@ def check_values(table: pa.Table, name: str, *, source: str = "") -> None:
         bad = ~np.isfinite(table.column(col).to_numpy())
         if bad.any():
             raise TableError(f"table '{name}'{where}: column '{col}' has {int(bad.sum())} non-finite value(s)")
-    if name == "detections" and table.num_rows:
+    if name in ("detections", "lifted_detections") and table.num_rows:
         s = table.column("score").to_numpy()
         if (s < 0).any() or (s > 1).any():
             raise TableError(f"table '{name}'{where}: column 'score' must lie in [0, 1]")

@@ -13,7 +13,13 @@ import pandas as pd
 
 from humancal.camera import cameras_from_table
 
-__all__ = ["CheckReport", "check_detections_plausible", "check_cameras_valid"]
+__all__ = [
+    "CheckReport",
+    "check_detections_plausible",
+    "check_cameras_valid",
+    "check_focal_plausible",
+    "check_rig_geometry",
+]
 
 
 @dataclass(frozen=True)
@@ -80,3 +86,75 @@ def check_cameras_valid(cameras: pd.DataFrame, tol: float = 1e-5) -> CheckReport
     if bad:
         return CheckReport(False, "; ".join(bad), figures)
     return CheckReport(True, f"{len(cameras)} cameras: finite K, proper right-handed rotations", figures)
+
+
+PLAUSIBLE_HFOV_DEG = (10.0, 140.0)
+"""Horizontal fields of view of ordinary lenses (telephoto to wide angle, not fisheye), degrees."""
+
+
+def check_focal_plausible(cameras: pd.DataFrame, hfov_deg: tuple[float, float] = PLAUSIBLE_HFOV_DEG) -> CheckReport:
+    """Every focal length (``fx_px``, ``fy_px`` of a ``cameras`` or ``intrinsics`` table) gives a horizontal
+    field of view inside ``hfov_deg`` for its image width, and fx, fy agree within 20 %. Views whose focal is
+    not known yet (NaN, e.g. deferred intrinsics) are skipped and counted."""
+    bad, fovs, unknown = [], [], 0
+    for r in cameras.itertuples(index=False):
+        if not (np.isfinite(r.fx_px) and np.isfinite(r.fy_px)):
+            unknown += 1
+            continue
+        if r.fx_px <= 0 or r.fy_px <= 0:
+            bad.append(f"view {r.view}: focal {r.fx_px:.0f}/{r.fy_px:.0f} px not positive")
+            continue
+        fov = float(np.degrees(2.0 * np.arctan(0.5 * r.width_px / r.fx_px)))
+        fovs.append(fov)
+        if not hfov_deg[0] <= fov <= hfov_deg[1]:
+            bad.append(f"view {r.view}: focal {r.fx_px:.0f} px gives a {fov:.1f} deg horizontal field of view "
+                       f"for a {r.width_px} px wide image (plausible: {hfov_deg[0]:.0f}-{hfov_deg[1]:.0f} deg)")
+        if abs(np.log(r.fx_px / r.fy_px)) > np.log(1.2):
+            bad.append(f"view {r.view}: fx {r.fx_px:.0f} px and fy {r.fy_px:.0f} px differ by more than 20 %")
+    figures = {"views": float(len(cameras)), "unknown_focal_views": float(unknown)}
+    if fovs:
+        figures.update(min_hfov_deg=min(fovs), max_hfov_deg=max(fovs))
+    if bad:
+        return CheckReport(False, "; ".join(bad), figures)
+    known = len(cameras) - unknown
+    if known == 0:
+        return CheckReport(True, "no focal length to check", figures)
+    note = f" ({unknown} not known yet)" if unknown else ""
+    return CheckReport(True, f"{known} focal lengths give plausible fields of view{note}", figures)
+
+
+def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in_view: float = 0.5) -> CheckReport:
+    """The calibrated rig makes physical sense in its world frame (Z up, floor z = 0, metres).
+
+    * above the floor: every camera centre has z > 0;
+    * looking at the people: at least ``min_in_view`` of the people's positions (``people_floor_m`` (N, 3)
+      floor points, raised to 1 m, the middle of a body) are in front of every camera and project inside its
+      image.
+
+    The right-handedness of the camera frames is :func:`check_cameras_valid`'s.
+    """
+    points = np.asarray(people_floor_m, dtype=np.float64).reshape(-1, 3) + np.array([0.0, 0.0, 1.0])
+    bad, heights, seen = [], [], []
+    for v, cam in enumerate(cameras_from_table(cameras)):
+        height = float(cam.center_world_m[2])
+        heights.append(height)
+        if not height > 0:
+            bad.append(f"view {v}: camera centre {height:.2f} m is not above the floor")
+        if len(points):
+            cam_pts = points @ cam.R_cam_from_world.T + cam.t_cam_from_world_m
+            z = cam_pts[:, 2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                uv = cam_pts[:, :2] / z[:, None] @ np.diag([cam.K[0, 0], cam.K[1, 1]]) + cam.K[:2, 2]
+            inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= cam.width_px) & (uv[:, 1] >= 0) & (uv[:, 1] <= cam.height_px)
+            seen.append(float(inside.mean()))
+            if inside.mean() < min_in_view:
+                bad.append(f"view {v}: only {100 * inside.mean():.0f} % of the people are in front of the camera "
+                           f"and inside its image (need {100 * min_in_view:.0f} %)")
+    figures = {"min_camera_height_m": min(heights) if heights else float("nan")}
+    if seen:
+        figures["min_people_in_view_fraction"] = min(seen)
+    if not len(points):
+        bad.append("no people positions to check the cameras' viewing directions against")
+    if bad:
+        return CheckReport(False, "; ".join(bad), figures)
+    return CheckReport(True, f"{len(heights)} cameras above the floor, each seeing most of the people", figures)

@@ -1,8 +1,8 @@
 """``humancal``: the command-line interface (the stable entry point for users and scripts).
 
-    humancal demo                        materialize every per-sequence asset of synthetic__demo, print its metrics
+    humancal demo                        materialize what synthetic__demo needs (the lifter first), print its metrics
     humancal update [--partition P ...]  materialize only what is missing or stale
-    humancal report [--partition P] [--format md|csv]
+    humancal report [--partition P] [--format md|csv]   (P may also be cmu_mocap__held_out_02_14)
     humancal export detections|cameras --partition P --format F --out PATH
     humancal ui                          the Dagster UI on 127.0.0.1
 
@@ -21,6 +21,8 @@ import time
 from pathlib import Path
 
 DEMO_PARTITION = "synthetic__demo"
+SHARED_METRIC_TABLES = {"cmu_mocap__held_out_02_14": "lifter_heldout_metrics"}
+"""Metric tables of unpartitioned assets, by the name ``report --partition`` knows them under."""
 QUIET_RUN_CONFIG = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
 
 
@@ -82,14 +84,16 @@ def _stored_metrics(partitions: list[str] | None, headline_only: bool):
     from pipelines.definitions import artifacts_root
     from resources.io_managers import partition_path
 
+    shared = {key: partition_path(artifacts_root(), asset, None) for key, asset in SHARED_METRIC_TABLES.items()}
     if partitions:
-        files = [partition_path(artifacts_root(), "metric_tables", p) for p in partitions]
+        files = [shared.get(p) or partition_path(artifacts_root(), "metric_tables", p) for p in partitions]
         missing = [str(f) for f in files if not f.exists()]
         if missing:
-            raise SystemExit(f"humancal: no metric table stored for {missing}; run `humancal update --partition ...` first")
+            raise SystemExit(f"humancal: no metric table stored for {missing}; run `humancal update` first")
     else:
         folder = UPath(artifacts_root()) / "metric_tables"
-        files = sorted(folder.glob("*.parquet")) if folder.exists() else []
+        files = [f for f in shared.values() if f.exists()]
+        files += sorted(folder.glob("*.parquet")) if folder.exists() else []
     if not files:
         raise SystemExit("humancal: no metric tables stored yet; run `humancal demo` or `humancal update` first")
     table = pd.concat([pd.read_parquet(str(f)) for f in files], ignore_index=True)
@@ -99,25 +103,40 @@ def _stored_metrics(partitions: list[str] | None, headline_only: bool):
 
 
 def cmd_demo(args) -> int:
-    import dagster as dg
-
     from pipelines.definitions import defs
+    from pipelines.update import update
 
     instance = _instance()
     register_partitions(instance, defs)
-    print(f"humancal demo: materializing the per-sequence graph for {DEMO_PARTITION} ...", flush=True)
+    print(f"humancal demo: materializing what {DEMO_PARTITION} needs (the first run trains the lifter on the CMU "
+          "mocap: about 15 minutes on 2 cores; later runs reuse it) ...", flush=True)
     t0 = time.perf_counter()
-    keys = [k for k in defs.resolve_asset_graph().materializable_asset_keys
-            if defs.resolve_asset_graph().get(k).partitions_def is not None]
-    result = dg.materialize(
-        assets=list(defs.assets), resources=defs.resources, selection=dg.AssetSelection.assets(*keys),
-        partition_key=DEMO_PARTITION, instance=instance, run_config=QUIET_RUN_CONFIG,
-    )
-    if not result.success:
+    exclude = _report_missing_data(defs)
+    result = update(defs, instance, partitions=[DEMO_PARTITION], exclude=list(exclude), on_round=_print_round,
+                    run_config=QUIET_RUN_CONFIG)
+    print(f"materialized {result.count} asset partitions in {time.perf_counter() - t0:.1f} s\n", flush=True)
+    if _report_failures(result):
         return 1
-    print(f"materialized {len(keys)} asset partitions in {time.perf_counter() - t0:.1f} s\n", flush=True)
     _print_metrics(_stored_metrics([DEMO_PARTITION], headline_only=True), "md")
     return 0
+
+
+def _print_round(n, items) -> None:
+    names = ", ".join(f"{k.to_user_string()}[{p}]" if p else k.to_user_string() for k, p in items)
+    print(f"round {n}: {len(items)} stale or missing: {names}", flush=True)
+
+
+def _report_missing_data(defs) -> dict:
+    """The assets whose external data is missing here; prints them and what cannot be computed without them."""
+    from pipelines.update import excluded_with_descendants
+
+    exclude = _assets_missing_data(defs)
+    for key, folder in exclude.items():
+        print(f"skipping {key.to_user_string()}: it needs {folder}/ under the data root (HUMANCAL_DATA_DIR)")
+    downstream = sorted(k.to_user_string() for k in excluded_with_descendants(defs, exclude) - set(exclude))
+    if downstream:
+        print(f"  ... and what depends on it: {', '.join(downstream)}")
+    return exclude
 
 
 def _assets_missing_data(defs) -> dict:
@@ -142,17 +161,20 @@ def cmd_update(args) -> int:
     register_partitions(instance, defs)
     _check_partitions(args.partition, defs)
 
-    def on_round(n, items):
-        names = ", ".join(f"{k.to_user_string()}[{p}]" if p else k.to_user_string() for k, p in items)
-        print(f"round {n}: {len(items)} stale or missing: {names}", flush=True)
-
-    exclude = _assets_missing_data(defs)
-    for key, folder in exclude.items():
-        print(f"skipping {key.to_user_string()}: it needs {folder}/ under the data root (HUMANCAL_DATA_DIR)")
+    exclude = _report_missing_data(defs)
     result = update(defs, instance, partitions=args.partition or None, exclude=list(exclude),
-                    on_round=on_round, run_config=QUIET_RUN_CONFIG)
+                    on_round=_print_round, run_config=QUIET_RUN_CONFIG)
     print(f"materialized {result.count} asset partitions")
-    return 0
+    return _report_failures(result)
+
+
+def _report_failures(result) -> int:
+    if not result.failed:
+        return 0
+    print(f"{len(result.failed)} asset partition(s) failed (what depends on them was left out):", file=sys.stderr)
+    for asset, partition, message in result.failed:
+        print(f"  {asset}[{partition}]: {message}" if partition else f"  {asset}: {message}", file=sys.stderr)
+    return 1
 
 
 def cmd_report(args) -> int:

@@ -5,20 +5,23 @@ from __future__ import annotations
 import dagster as dg
 
 from assets.baselines import gt_camera_triangulation
+from assets.calibration import detections, extrinsics, intrinsics
+from assets.lifter import build_lifter_assets
 from assets.metric_tables import metric_tables
 from assets.mocap import mocap_clips
 from assets.registry import sequence_registry
 from assets.sequence_inputs import sequence_inputs
+from humancal.lifter import LifterConfig
 from humancal.settings import state_dir
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
 from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFactory
 
-PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, metric_tables]
+PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, metric_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
 SHARED_ASSETS = [sequence_registry, mocap_clips]
-"""Unpartitioned assets."""
+"""Unpartitioned assets (besides the lifter's, which depend on its training configuration)."""
 
 
 def artifacts_root() -> str:
@@ -26,11 +29,23 @@ def artifacts_root() -> str:
     return str(state_dir() / "artifacts")
 
 
-def build_definitions(storage_root: str | None = None) -> dg.Definitions:
-    """Definitions with artifacts under ``storage_root`` (default: :func:`artifacts_root`)."""
+def build_definitions(
+    storage_root: str | None = None,
+    lifter_config: LifterConfig | None = None,
+    datasets: DatasetsResource | None = None,
+) -> dg.Definitions:
+    """Definitions with artifacts under ``storage_root`` (default: :func:`artifacts_root`).
+
+    Args:
+        storage_root: artifact folder or fsspec URL.
+        lifter_config: training configuration of ``lifter_checkpoint`` (default :meth:`LifterConfig.default`;
+            tests use a small one).
+        datasets: the datasets resource (default: the packaged config and ``HUMANCAL_DATA_DIR``).
+    """
     root = storage_root or artifacts_root()
+    lifter_assets = build_lifter_assets(lifter_config or LifterConfig.default())
     return dg.Definitions(
-        assets=[*SHARED_ASSETS, *PER_SEQUENCE_ASSETS],
+        assets=[*SHARED_ASSETS, *lifter_assets, *PER_SEQUENCE_ASSETS],
         jobs=[
             dg.define_asset_job("sequence_job", selection=dg.AssetSelection.groups("sequence"),
                                 description="Every per-sequence asset of one partition."),
@@ -39,7 +54,7 @@ def build_definitions(storage_root: str | None = None) -> dg.Definitions:
             "io_manager": ParquetIOManagerFactory(base_path=root),
             "checkpoint_io_manager": CheckpointIOManagerFactory(base_path=root),
             "body_model": BodyModelResource(),
-            "datasets": DatasetsResource(),
+            "datasets": datasets or DatasetsResource(),
         },
     )
 

@@ -1,20 +1,33 @@
 """Sweep the camera initialisation over seeded synthetic scenes (and Shelf when its data is present).
 
 Each synthetic scene draws 2-8 people, 3-8 views (ring, or an arc for one scene in four), a focal range inside
-500-2500 px and 60-150 frames, with the generator's default detector noise; the lifted poses are the stand-in
-of :mod:`humancal.calibration.stand_in` (50 mm joint noise, 4 cm height noise, 3 degree pose rotation noise,
-1 % depth flips). It reports the median and 90th percentile over all views of the focal, angle and position
-errors (after the similarity alignment of :mod:`evaluation.camera_metrics`), the reprojection error, how
-often the single-view focal was flagged ill-conditioned, and run times.
+500-2500 px and 60-150 frames, with the generator's default detector noise. The lifted poses come from either
+
+* ``--lifted stand-in`` (default without ``--lifter``): the stand-in of :mod:`humancal.calibration.stand_in`
+  (ground truth with 50 mm joint noise, 4 cm height noise, 3 degree pose rotation noise, 1 % depth flips), or
+* ``--lifter CHECKPOINT`` (implies ``--lifted lifter``): the learned lifter of :mod:`humancal.lifter` applied to
+  the 2D detections only, in its crop frames (no ground truth is used in the lifting).
+
+It reports the median and 90th percentile over all views of the focal, angle and position errors (after the
+similarity alignment of :mod:`evaluation.camera_metrics`), the rig's metric scale error (which that alignment
+removes), the reprojection error, how often the single-view focal was flagged ill-conditioned, and run times.
+Views without upright people are deferred to the multi-view steps (``missing_upright="defer"``, as in the
+pipeline).
 
 Shelf: the real OpenPose detections grouped by ``humancal.datasets.shelf.load_shelf``; detections are matched
 to the projected ground truth (``evaluation.detection_quality.evaluate_grouping``) only to build the stand-in
-lifted poses and the reprojection metric's identities.
+lifted poses (stand-in mode) and the reprojection metric's identities (both modes).
+
+With the lifter, the sweep also reports the lifted poses' quality against the ground truth (evaluation only):
+the fraction of detections lifted, the fraction scoring as upright, and the height error (bias and mean absolute
+error) over all lifted detections of known people and over the upright ones.
 
 Usage::
 
     python scripts/calibration_sweep.py --scenes 30 --out .humancal/sweeps/calibration
     python scripts/calibration_sweep.py --scenes 0 --shelf      # Shelf only
+    python scripts/calibration_sweep.py --scenes 30 --shelf --lifter .humancal/artifacts/lifter_checkpoint.pt \
+        --out .humancal/sweeps/calibration_lifter
 """
 
 from __future__ import annotations
@@ -39,11 +52,13 @@ from evaluation.camera_metrics import camera_errors, reprojection_errors_per_vie
 from humancal.calibration import (  # noqa: E402
     CalibrationError,
     IntrinsicsConfig,
+    LiftedPoses,
     estimate_extrinsics,
     estimate_intrinsics,
     plot_rigs,
     stand_in_lifted_poses,
 )
+from humancal.detections import detections_to_dense  # noqa: E402
 
 PAPER_SHELF = {"focal_error_pct": 8.15, "position_error_mm": 605.88, "angle_error_deg": 9.72,
                "reprojection_error_px": 44.94}
@@ -68,6 +83,42 @@ def scene_config(index: int, seed0: int):
     )
 
 
+def lift_with(lifter, detections_table: pd.DataFrame):
+    """Dense detections and their learned-lifter poses (crop frames; 2D detections only), and the seconds taken."""
+    from humancal.lifter import lift_detections
+
+    t0 = time.perf_counter()
+    dense = detections_to_dense(detections_table)
+    lifted = LiftedPoses.from_lifter(lift_detections(lifter, dense.keypoints_px, dense.scores))
+    return dense, lifted, time.perf_counter() - t0
+
+
+def lift_quality(lifted: LiftedPoses, true_height_m: np.ndarray, config: IntrinsicsConfig) -> dict:
+    """Evaluation only: lifted height error and upright scores against the truth (NaN truth = unknown person).
+
+    Returns the height error (estimate - truth, metres) over all lifted detections of known people and over the
+    upright candidates (``upright_score >= config.upright_threshold``), and the fraction of such candidates.
+    """
+    known = lifted.valid & np.isfinite(true_height_m)
+    err = lifted.height_m - true_height_m
+    up = known & (lifted.upright_score >= config.upright_threshold)
+    out = {"lifted_fraction": float(lifted.valid.mean()), "upright_fraction": float(up.sum() / max(known.sum(), 1))}
+    for name, m in (("all", known), ("upright", up)):
+        if m.any():
+            out[f"height_bias_{name}_m"] = float(np.median(err[m]))
+            out[f"height_mae_{name}_m"] = float(np.mean(np.abs(err[m])))
+    return out
+
+
+def _scene_person_ids(scene, dense) -> np.ndarray:
+    """Ground-truth person of every dense detection row of a synthetic scene (-1: false positive)."""
+    d = scene.detector
+    truth = pd.DataFrame({"frame": d.frame, "view": d.view, "det_id": scene.det_id, "person_id": d.person_id})
+    truth = truth.set_index(["frame", "view", "det_id"])["person_id"]
+    index = pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])
+    return truth.reindex(index).fillna(-1).to_numpy(np.int64)
+
+
 def calibrate(detections, lifted, image_size_px, intrinsics_config):
     """Intrinsics then extrinsics; returns (intrinsics, extrinsics, seconds per stage)."""
     t0 = time.perf_counter()
@@ -90,6 +141,8 @@ def view_rows(name, intrinsics, extrinsics, gt_cameras, detections_table, associ
             "scene": name, "view": v, "views": len(gt_cameras), "focal_gt_px": f_gt,
             "focal_error_pct": err["focal_error_pct"][v], "position_error_mm": err["position_error_mm"][v],
             "angle_error_deg": err["angle_error_deg"][v], "reprojection_error_px": reproj[v],
+            # metric scale of the estimated rig relative to the truth (the alignment removes it from the errors)
+            "scale_error_pct": 100.0 * (1.0 / err["alignment"].scale - 1.0),
             "reprojection_error_gt_cameras_px": floor[v], "single_view_status": est.status,
             "single_view_focal_error_pct": 100 * abs(est.fx_px - f_gt) / f_gt,
             "single_view_rel_uncertainty": est.focal_rel_uncertainty,
@@ -99,7 +152,8 @@ def view_rows(name, intrinsics, extrinsics, gt_cameras, detections_table, associ
     return rows
 
 
-def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None) -> pd.DataFrame:
+def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None, lifter=None) -> pd.DataFrame:
+    """The sweep over ``n`` seeded scenes; ``lifter`` (a loaded lifter) replaces the stand-in lifted poses."""
     from humancal.body import BodyModel
     from humancal.synthetic import generate_scene
 
@@ -109,17 +163,26 @@ def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None
         cfg = scene_config(i, seed0)
         t0 = time.perf_counter()
         scene = generate_scene(cfg, body, sequence=f"sweep_{i}")
+        # the stand-in's random draws come first either way, so both modes see the same scene
         stand_in = stand_in_lifted_poses(scene, np.random.default_rng([seed0, i, 1]))
         gen_s = time.perf_counter() - t0
+        extra = {"generate_s": gen_s}
+        if lifter is None:
+            detections, lifted = stand_in.detections, stand_in.lifted
+        else:
+            detections, lifted, extra["lift_s"] = lift_with(lifter, scene.detections)
+            pid = _scene_person_ids(scene, detections)
+            truth = np.where(pid >= 0, np.asarray(scene.height_m)[np.maximum(pid, 0)], np.nan)
+            extra.update(lift_quality(lifted, truth, config))
         sizes = [(c.width_px, c.height_px) for c in scene.rig]
         try:
-            intr, extr, times = calibrate(stand_in.detections, stand_in.lifted, sizes, config)
+            intr, extr, times = calibrate(detections, lifted, sizes, config)
         except CalibrationError as exc:
             print(f"scene {i}: CalibrationError: {exc}")
             rows.append({"scene": f"sweep_{i}", "failed": str(exc)})
             continue
         r = view_rows(f"sweep_{i}", intr, extr, list(scene.rig), scene.detections, scene.associations,
-                      {**times, "generate_s": gen_s})
+                      {**times, **extra})
         for row in r:
             row.update(people=cfg.num_people, frames=cfg.num_frames, rig=cfg.rig)
         rows += r
@@ -134,7 +197,8 @@ def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None
     return pd.DataFrame(rows)
 
 
-def run_shelf(config: IntrinsicsConfig, out: Path | None) -> pd.DataFrame | None:
+def run_shelf(config: IntrinsicsConfig, out: Path | None, lifter=None) -> pd.DataFrame | None:
+    """Shelf with the stand-in lifted poses, or with ``lifter`` (a loaded lifter) applied to the 2D detections."""
     from evaluation.detection_quality import evaluate_grouping
     from humancal.calibration.stand_in import canonical_from_shelf15, stand_in_from_matches
     from humancal.datasets.shelf import SHELF15_JOINTS, load_shelf
@@ -154,16 +218,26 @@ def run_shelf(config: IntrinsicsConfig, out: Path | None) -> pd.DataFrame | None
     ankle = np.minimum(joints15[..., SHELF15_JOINTS.index("left_ankle"), 2],
                        joints15[..., SHELF15_JOINTS.index("right_ankle"), 2])
     height = np.nanmedian(top - ankle, axis=1) + 0.07  # ankle height over the soles
-    stand_in = stand_in_from_matches(shelf.detections, shelf.cameras, canonical_from_shelf15(joints15), height,
-                                     matches, np.random.default_rng(0))
     load_s = time.perf_counter() - t0
-    intr, extr, times = calibrate(stand_in.detections, stand_in.lifted, shelf.image_size_px,
-                                  config.replace(missing_upright="defer"))
+    extra = {"load_s": load_s}
+    if lifter is None:
+        stand_in = stand_in_from_matches(shelf.detections, shelf.cameras, canonical_from_shelf15(joints15), height,
+                                         matches, np.random.default_rng(0))
+        detections, lifted = stand_in.detections, stand_in.lifted
+    else:
+        detections, lifted, extra["lift_s"] = lift_with(lifter, shelf.detections)
+        ids = matches.drop_duplicates(["frame", "view", "det_id"]).set_index(["frame", "view", "det_id"])["person_id"]
+        pid = ids.reindex(pd.MultiIndex.from_arrays([detections.frame, detections.view, detections.det_id]))
+        pid = pid.fillna(-1).to_numpy(np.int64)
+        truth = np.where(pid >= 0, height[np.maximum(pid, 0)], np.nan)
+        extra.update(lift_quality(lifted, truth, config))
+    intr, extr, times = calibrate(detections, lifted, shelf.image_size_px, config.replace(missing_upright="defer"))
     assoc = matches[["sequence", "frame", "view", "det_id", "person_id"]]
-    rows = view_rows("shelf", intr, extr, list(shelf.cameras), shelf.detections, assoc, {**times, "load_s": load_s})
+    rows = view_rows("shelf", intr, extr, list(shelf.cameras), shelf.detections, assoc, {**times, **extra})
     if out is not None:
+        what = "stand-in" if lifter is None else "learned-lifter"
         plot_rigs(extr.cameras, list(shelf.cameras), extr.diagnostics.floor.floor_points_m, out / "shelf_rigs.png",
-                  title="Shelf (stand-in lifted poses)")
+                  title=f"Shelf ({what} lifted poses)")
     print(extr.diagnostics.per_view.to_string())
     return pd.DataFrame(rows)
 
@@ -176,12 +250,21 @@ def summary(df: pd.DataFrame) -> dict:
         if m in ok and len(ok):
             out[m] = {"mean": float(ok[m].mean()), "median": float(ok[m].median()),
                       "p90": float(ok[m].quantile(0.9)), "max": float(ok[m].max())}
+    if len(ok) and "scale_error_pct" in ok:
+        scale = ok.groupby("scene")["scale_error_pct"].first()
+        out["scale_error_pct_per_scene"] = {"median": float(scale.median()), "median_abs": float(scale.abs().median()),
+                                            "p90_abs": float(scale.abs().quantile(0.9))}
     if len(ok):
         out["single_view_ill_conditioned_fraction"] = float((ok["single_view_status"] != "ok").mean())
-        per_scene = ok.groupby("scene")[["intrinsics_s", "extrinsics_s"]].first()
+        per_scene = ok.groupby("scene").first()
         out["seconds_per_scene"] = {"intrinsics_median": float(per_scene["intrinsics_s"].median()),
                                     "extrinsics_median": float(per_scene["extrinsics_s"].median()),
                                     "extrinsics_max": float(per_scene["extrinsics_s"].max())}
+        if "lift_s" in per_scene:
+            out["seconds_per_scene"]["lift_median"] = float(per_scene["lift_s"].median())
+        quality = [c for c in per_scene.columns if c.startswith(("height_", "lifted_fraction", "upright_fraction"))]
+        if quality:
+            out["lifter_quality_scene_median"] = {c: float(per_scene[c].median()) for c in quality}
     return out
 
 
@@ -191,22 +274,42 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="sweep seed")
     parser.add_argument("--shelf", action="store_true", help="also run Shelf (skipped when its data is absent)")
     parser.add_argument("--plumb-top", default="shoulders", help="IntrinsicsConfig.plumb_top")
+    parser.add_argument("--lifted", choices=("stand-in", "lifter"), default=None,
+                        help="source of the lifted poses (default: 'lifter' when --lifter is given, else 'stand-in')")
+    parser.add_argument("--lifter", type=Path, default=None, help="learned lifter checkpoint (humancal.lifter)")
     parser.add_argument("--out", type=Path, default=None, help="folder for per-view CSVs, summary JSON, plots")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    config = IntrinsicsConfig(plumb_top=args.plumb_top)
+    mode = args.lifted or ("lifter" if args.lifter is not None else "stand-in")
+    if mode == "lifter" and args.lifter is None:
+        parser.error("--lifted lifter needs --lifter CHECKPOINT")
+    lifter = None
+    if mode == "lifter":
+        from humancal.lifter import load_lifter
+
+        lifter = load_lifter(args.lifter)
+    # a view without upright people gets its focal from the other views (what the pipeline does): the learned
+    # lifter's upright score is 0 for steeply pitched cameras and for walking people, so some views have none
+    config = IntrinsicsConfig(plumb_top=args.plumb_top, missing_upright="defer")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
-    result = {}
+    result = {"lifted": mode}
+    if lifter is not None:
+        result["lifter_checkpoint"] = args.lifter.name
     if args.scenes > 0:
-        df = run_synthetic(args.scenes, args.seed, config, args.out)
+        df = run_synthetic(args.scenes, args.seed, config, args.out, lifter)
         result["synthetic"] = summary(df)
         if args.out is not None:
             df.to_csv(args.out / "synthetic_views.csv", index=False)
     if args.shelf:
-        shelf = run_shelf(config, args.out)
+        shelf = run_shelf(config, args.out, lifter)
         if shelf is not None:
             means = {m: float(shelf[m].mean()) for m in PAPER_SHELF}
+            quality = {c: float(shelf[c].iloc[0]) for c in shelf.columns
+                       if c.startswith(("height_", "lifted_fraction", "upright_fraction"))}
+            if quality:
+                result["shelf_lifter_quality"] = quality
+            result["shelf_scale_error_pct"] = float(shelf["scale_error_pct"].iloc[0])
             result["shelf"] = {"mean_over_views": means, "paper_init": PAPER_SHELF,
                                "reprojection_error_gt_cameras_px": float(shelf["reprojection_error_gt_cameras_px"].mean()),
                                "per_view": shelf.to_dict("records")}

@@ -26,21 +26,11 @@ import numpy as np
 import pandas as pd
 import torch
 
-from humancal.lifter import (
-    LifterConfig,
-    evaluate_lifter,
-    load_lifter,
-    synthesize_samples,
-    train_lifter,
-)
+from humancal.lifter import HELD_OUT_CMU_SUBJECTS, LifterConfig, held_out_report, load_lifter, train_lifter
+from humancal.lifter.evaluate import HELD_OUT_EVAL_SAMPLES
 from humancal.settings import REPO_ROOT, dataset_dir
 
 _DEFAULT_DIR = Path(tempfile.gettempdir()) / "humancal_lifter"
-DEFAULT_VAL_SUBJECTS = ("02", "14")
-"""Held-out CMU subjects: 02 (walk, run, jump, punch, swordplay) and 14 (everyday actions); both kinds of
-motion are also present in the training subjects (07-09, 13)."""
-EVAL_SAMPLES = 20_000
-EVAL_SEED = 12345
 
 
 def _cmu_clips(table_path: Path) -> list[tuple[str, str, np.ndarray]]:
@@ -93,25 +83,10 @@ def _print_epoch(record: dict) -> None:
         )
 
 
-def _held_out_report(checkpoint: dict, val_clips: list[tuple[str, np.ndarray]], config: LifterConfig) -> None:
+def _held_out_report(checkpoint: dict, val_clips: list[tuple[str, np.ndarray]]) -> None:
     """Fresh held-out samples (another seed than validation), through the whole inference path."""
-    lifter = load_lifter(checkpoint)
-    samples = synthesize_samples(val_clips, EVAL_SAMPLES, config.samples, np.random.default_rng(EVAL_SEED))
-    joints = (samples.scores > 0).sum(axis=1)
-    groups = {
-        "all": np.ones(len(samples), bool),
-        ">= 20 of 23 joints": joints >= 20,
-        "12-19 joints": (joints >= 12) & (joints < 20),
-        "< 12 joints": joints < 12,
-        "left-right flipped": samples.flipped,
-    }
-    rows = []
-    for name, mask in groups.items():
-        if mask.any():
-            metrics = evaluate_lifter(lifter, samples.subset(mask))
-            rows.append({"detections": name, "share_%": 100.0 * mask.mean(), **metrics})
-    table = pd.DataFrame(rows).drop(columns="num_samples").set_index("detections")
-    print(f"\nheld-out subjects, {EVAL_SAMPLES} fresh samples (root-relative, mm):")
+    table = held_out_report(load_lifter(checkpoint), val_clips).drop(columns="num_samples")
+    print(f"\nheld-out subjects, {HELD_OUT_EVAL_SAMPLES} fresh samples (root-relative, mm):")
     print(table.to_string(float_format=lambda v: f"{v:.1f}"))
 
 
@@ -123,7 +98,7 @@ def main() -> None:
     parser.add_argument("--motions-table", type=Path, default=_DEFAULT_DIR / "cmu_motions.parquet",
                         help="retargeted CMU motions table (read if present, else written)")
     parser.add_argument(
-        "--val-subjects", default=",".join(DEFAULT_VAL_SUBJECTS), help="held-out subjects, comma-separated"
+        "--val-subjects", default=",".join(HELD_OUT_CMU_SUBJECTS), help="held-out subjects, comma-separated"
     )
     parser.add_argument("--synthetic", action="store_true", help="train on procedural synthetic motions instead of CMU")
     parser.add_argument("--threads", type=int, default=1,
@@ -164,7 +139,7 @@ def main() -> None:
     partial = out.with_suffix(".partial")
     torch.save(checkpoint, partial)
     os.replace(partial, out)
-    _held_out_report(checkpoint, val, config)
+    _held_out_report(checkpoint, val)
     final = checkpoint["val_metrics"]
     print(f"\nvalidation ({config.validation_samples} samples): MPJPE {final['mpjpe_mm']:.1f} mm, "
           f"PA-MPJPE {final['pa_mpjpe_mm']:.1f} mm")

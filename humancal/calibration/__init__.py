@@ -21,6 +21,7 @@ from humancal.calibration.floor import FloorAlignment, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsConfig, IntrinsicsEstimate, estimate_intrinsics
 from humancal.calibration.plot import plot_rigs
 from humancal.calibration.stand_in import StandIn, stand_in_lifted_poses
+from humancal.calibration.tables import intrinsics_from_table, intrinsics_to_table
 from humancal.calibration.types import CalibrationError, LiftedPoses
 
 __all__ = [
@@ -39,6 +40,8 @@ __all__ = [
     "umeyama",
     "align_rig",
     "plot_rigs",
+    "intrinsics_to_table",
+    "intrinsics_from_table",
     "StandIn",
     "stand_in_lifted_poses",
 ]

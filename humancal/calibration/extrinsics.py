@@ -5,13 +5,15 @@ Steps (each in its own module):
 1. relative rotations from Procrustes alignment of lifted poses over all candidate detection pairs of each
    frame, with a consensus over many frames, then rotation averaging (camera 0 = identity)
    (:mod:`.rotation_consensus`);
-2. root positions per detection by a translation-only PnP, then one linear solve of all translations *and*
-   focal lengths from the candidate pairs, Cauchy-reweighted so wrong pairs drop out (:mod:`.translations`);
-   repeated a few times because the roots depend on the focal lengths;
+2. root positions per detection by a translation-only PnP, then one solve of all translations *and* focal
+   lengths from the candidate pairs (linear, then with a size factor per pair for the lifter's per-person size
+   errors), Cauchy-reweighted so wrong pairs drop out (:mod:`.translations`); repeated a few times because the
+   roots depend on the focal lengths;
 3. cross-view groups (one person in one frame) from the consistent pairs (:mod:`.matching`);
 4. a bundle adjustment over focal lengths, rotations, translations and the groups' keypoints, with the lifted
-   poses as a metric shape prior (:mod:`.multiview_focal`): this recovers the focal lengths that single views
-   cannot observe (level or straight-down cameras) and removes the bias of the linear solve;
+   poses as a shape prior up to a size factor per group (:mod:`.multiview_focal`): this recovers the focal
+   lengths that single views cannot observe (level or straight-down cameras) and removes the bias of the linear
+   solve;
 5. the final world frame: Z up, floor at z = 0 from the standing people (:mod:`.floor`).
 """
 
@@ -25,7 +27,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from humancal.calibration.floor import FloorAlignment, align_to_floor
+from humancal.calibration.floor import FloorAlignment, align_to_floor, standing_scores
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.matching import groups_from_pairs
 from humancal.calibration.multiview_focal import bundle_adjust
@@ -57,11 +59,15 @@ class ExtrinsicsConfig:
         focal_range_rel: allowed focal range, multiples of the image diagonal (clips the initial values).
         max_groups: matched groups used by the bundle adjustment (spread over the sequence).
         shape_std_m: std of the lifted joints in the bundle adjustment, metres.
+        person_scale_std: relative std of a lifted person's size (a lifter sees body proportions, not size): the
+            linear solve and the bundle adjustment estimate a size correction per matched pair / group with this
+            prior, so that people's size errors do not distort the rig; None: sizes taken as lifted.
         bundle_iterations: Levenberg-Marquardt iterations.
         max_focal_rel_std: a final focal with a larger relative std is reported as ``poorly_constrained``.
         square_pixels: one focal per view (fx = fy).
         align_floor: move the result to the Z-up, floor z = 0 frame (else camera 0 stays the world).
-        upright_threshold: groups at least this upright (mean score) count as standing for the floor.
+        upright_threshold: groups whose reconstructed keypoints score at least this as standing
+            (:func:`~humancal.calibration.floor.standing_scores`) count as standing for the floor.
         seed: randomness of the subsampling.
     """
 
@@ -76,6 +82,7 @@ class ExtrinsicsConfig:
     focal_range_rel: tuple[float, float] = (0.15, 5.0)
     max_groups: int = 200
     shape_std_m: float = 0.1
+    person_scale_std: float | None = 0.1
     bundle_iterations: int = 40
     max_focal_rel_std: float = 0.05
     square_pixels: bool = True
@@ -225,7 +232,8 @@ def _linear(detections, lifted, rows_a, rows_b, R, f0, prior_rel, pp, diag, conf
     f = f0.copy()
     for _ in range(config.linear_iterations):
         roots = root_positions(detections, lifted, _K(f, f, pp))
-        sol = solve_focals_translations(roots, detections.view, rows_a, rows_b, R, f0, lin_prior_rel)
+        sol = solve_focals_translations(roots, detections.view, rows_a, rows_b, R, f0, lin_prior_rel,
+                                        person_scale_std=config.person_scale_std)
         # the roots were computed at f: move at most by a factor 2 per pass (the linearisation is local)
         step = np.clip(np.nan_to_num(sol.focal_px / f, nan=1.0, posinf=2.0, neginf=0.5), 0.5, 2.0)
         f_new = np.clip(f * step, config.focal_range_rel[0] * diag, config.focal_range_rel[1] * diag)
@@ -327,7 +335,8 @@ def estimate_extrinsics(
     ba = bundle_adjust(
         detections, lifted, groups, points, f, f, pp, R, t_init,
         square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
-        shape_std_m=config.shape_std_m, max_iterations=config.bundle_iterations,
+        shape_std_m=config.shape_std_m, group_scale_std=config.person_scale_std,
+        max_iterations=config.bundle_iterations,
     )
     timings["bundle"] = time.perf_counter() - clock
 
@@ -335,8 +344,9 @@ def estimate_extrinsics(
     R_final, t_final = ba.R_cam_from_world, ba.t_cam_from_world_m
     floor = None
     if config.align_floor:
-        upright = np.array([lifted.upright_score[g].mean() for g in groups])
-        floor = align_to_floor(ba.points_world_m, upright, R_final[0], upright_threshold=config.upright_threshold)
+        # standing from the reconstructed (triangulated) keypoints: body-internal, camera-free
+        standing = standing_scores(ba.points_world_m)
+        floor = align_to_floor(ba.points_world_m, standing, R_final[0], upright_threshold=config.upright_threshold)
         R_final, t_final = floor.apply_to_camera(R_final, t_final)
     timings["floor"] = time.perf_counter() - clock
 

@@ -51,6 +51,8 @@ class BundleResult:
         inlier_fraction: fraction of keypoint observations within the Huber threshold.
         iterations: LM iterations run.
         converged: whether the relative cost decrease fell under the tolerance.
+        group_scale: (G,) size of each group's lifted poses relative to its keypoints (``q``; ones when the
+            scales were not estimated).
     """
 
     fx_px: np.ndarray
@@ -63,6 +65,7 @@ class BundleResult:
     inlier_fraction: float
     iterations: int
     converged: bool
+    group_scale: np.ndarray | None = None
 
 
 def rotvec_to_rotmat(rotvec: np.ndarray) -> np.ndarray:
@@ -103,6 +106,9 @@ class _Problem:
     prior_log_f: np.ndarray  # (V,)
     prior_w: np.ndarray  # (V,), 0 for none
     huber: float
+    # per-group scale of the lifted poses (log q, q = lifted size / true size): prior weight, or fixed at 0
+    scale_w: float = 0.0
+    free_scale: bool = False
 
 
 def _camera_params(p: _Problem) -> int:
@@ -118,8 +124,8 @@ def _unpack(p: _Problem, cams: np.ndarray, R0: np.ndarray):
     return fx, fy, R, t
 
 
-def _residuals(p: _Problem, cams, R0, X):
-    """Reprojection (O, 2), shape (S, 23, 3), prior (V,) residuals, all whitened."""
+def _residuals(p: _Problem, cams, R0, X, log_q):
+    """Reprojection (O, 2), shape (S, 23, 3), focal prior (V,), scale prior (G,) residuals, all whitened."""
     fx, fy, R, t = _unpack(p, cams, R0)
     P = np.einsum("oij,oj->oi", R[p.o_view], X[p.o_group, p.o_joint]) + t[p.o_view]
     z = P[:, 2]
@@ -127,22 +133,24 @@ def _residuals(p: _Problem, cams, R0, X):
     r_obs = (proj - p.o_px) * p.o_w[:, None]
     r_obs[z <= 1e-6] = 1e3  # behind the camera
     rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
-    r_shape = (rel @ R[p.s_view].transpose(0, 2, 1) - p.s_joints) * p.shape_w
+    q = np.exp(log_q)[p.s_group, None, None]
+    r_shape = (q * (rel @ R[p.s_view].transpose(0, 2, 1)) - p.s_joints) * p.shape_w
     nf = 1 if p.square else 2
     r_prior = (cams[:, :nf].mean(1) - p.prior_log_f) * p.prior_w
-    return r_obs, r_shape, r_prior, (fx, fy, R, t, P)
+    r_scale = log_q * p.scale_w
+    return r_obs, r_shape, r_prior, r_scale, (fx, fy, R, t, P)
 
 
 def _huber_weights(norms: np.ndarray, k: float) -> np.ndarray:
     return np.where(norms <= k, 1.0, k / np.maximum(norms, 1e-12))
 
 
-def _robust_cost(r_obs, r_shape, r_prior, k):
+def _robust_cost(r_obs, r_shape, r_prior, r_scale, k):
     def rho(n):
         return np.where(n <= k, n**2, 2 * k * n - k**2)
 
     return float(rho(np.linalg.norm(r_obs, axis=1)).sum() + rho(np.linalg.norm(r_shape, axis=2)).sum()
-                 + (r_prior**2).sum())
+                 + (r_prior**2).sum() + (r_scale**2).sum())
 
 
 def _scatter_blocks(target: np.ndarray, index: np.ndarray, blocks: np.ndarray) -> None:
@@ -153,12 +161,13 @@ def _scatter_blocks(target: np.ndarray, index: np.ndarray, blocks: np.ndarray) -
         target.shape)
 
 
-def _normal_equations(p: _Problem, cams, R0, X, free_cam):
-    """Gauss-Newton blocks: Hcc (V, nc, nc), Hcp (G, V, nc, 3J), Hpp (G, 3J, 3J), gc (V, nc), gp (G, 3J)."""
+def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
+    """Gauss-Newton blocks: Hcc (V, nc, nc), Hcp (G, V, nc, 3J + 1), Hpp (G, 3J + 1, 3J + 1), gc (V, nc),
+    gp (G, 3J + 1); the last point parameter of a group is its log scale ``log q``."""
     nc = _camera_params(p)
     nf = 1 if p.square else 2
     J3 = 3 * NUM_JOINTS
-    r_obs, r_shape, r_prior, (fx, fy, R, t, P) = _residuals(p, cams, R0, X)
+    r_obs, r_shape, r_prior, r_scale, (fx, fy, R, t, P) = _residuals(p, cams, R0, X, log_q)
     w_obs = _huber_weights(np.linalg.norm(r_obs, axis=1), p.huber)
     w_shape = _huber_weights(np.linalg.norm(r_shape, axis=2), p.huber)  # (S, 23)
 
@@ -203,7 +212,9 @@ def _normal_equations(p: _Problem, cams, R0, X, free_cam):
 
     # --- shape: r_k = w_k (R_v (X_k - (X_lh + X_rh)/2) - L_k); d r_k / d X_m = w_k R_v D[k, m] with
     # D = I - 1 c^T (c = 1/2 at both hips). R_v^T R_v = I makes the point block (D^T W^2 D) kron I_3.
+    # with the group's scale q: r_k = w_k (q R_v rel_k - L_k); every derivative gains a factor q
     sv, S = p.s_view, len(p.s_view)
+    qs = np.exp(log_q)[p.s_group]  # (S,)
     ws = p.shape_w * np.sqrt(w_shape)  # (S, 23)
     Rs = R[sv]
     rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
@@ -211,28 +222,46 @@ def _normal_equations(p: _Problem, cams, R0, X, free_cam):
     rs = r_shape * np.sqrt(w_shape)[..., None]
     c = np.zeros(NUM_JOINTS)
     c[[_LHIP, _RHIP]] = 0.5
-    # camera (rotation) part: d(R rel)/d omega = -[R rel]x
-    Jsc = -_skew(Rrel) * ws[..., None, None]  # (S, 23, 3, 3)
+    # camera (rotation) part: d(q R rel)/d omega = -q [R rel]x
+    Jsc = -_skew(Rrel) * (ws * qs[:, None])[..., None, None]  # (S, 23, 3, 3)
     Hcc_rot = np.zeros((p.V, 3, 3))
     _scatter_blocks(Hcc_rot, sv, np.einsum("skri,skrj->sij", Jsc, Jsc))
     Hcc[:, nf : nf + 3, nf : nf + 3] += Hcc_rot
     gc_rot = np.zeros((p.V, 3))
     _scatter_blocks(gc_rot, sv, np.einsum("skri,skr->si", Jsc, rs))
     gc[:, nf : nf + 3] += gc_rot
-    w2 = ws**2
+    w2 = (ws * qs[:, None]) ** 2
     sw2 = w2.sum(1)
     M = (np.eye(NUM_JOINTS)[None] * w2[:, :, None] - c[None, :, None] * w2[:, None, :] - w2[:, :, None] * c[None, None, :]
          + sw2[:, None, None] * np.outer(c, c)[None])  # (S, 23, 23) = D^T W^2 D
     M_group = np.zeros((p.G, NUM_JOINTS, NUM_JOINTS))
     _scatter_blocks(M_group, p.s_group, M)
     Hpp += (M_group[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]).reshape(p.G, J3, J3)
-    y = ws[..., None] * (rs @ Rs)  # w_k R^T r_k
+    y = (ws * qs[:, None])[..., None] * (rs @ Rs)  # w_k q R^T r_k
     _scatter_blocks(gp, p.s_group, (y - c[None, :, None] * y.sum(1, keepdims=True)).reshape(S, J3))
-    Z = ws[..., None, None] * np.einsum("skri,sra->skia", Jsc, Rs)  # (S, 23, 3, 3): Jsc_k^T w_k R
+    Z = (ws * qs[:, None])[..., None, None] * np.einsum("skri,sra->skia", Jsc, Rs)  # Jsc_k^T w_k q R
     cross = Z - c[None, :, None, None] * Z.sum(1, keepdims=True)  # (S, 23(m), 3(i), 3(a))
     Hcp_rot = np.zeros((p.G, p.V, 3, J3))
     _scatter_blocks(Hcp_rot.reshape(p.G * p.V, 3, J3), p.s_group * p.V + sv, cross.transpose(0, 2, 1, 3).reshape(S, 3, J3))
     Hcp[:, :, nf : nf + 3, :] += Hcp_rot
+
+    # --- group scales (log q): d r_k / d log q = w_k q R rel_k; its cross term with the rotation vanishes
+    # ((-q w [a]x)^T (q w a) = 0) and with the points it is q^2 (w_m^2 rel_m - c_m sum_k w_k^2 rel_k)
+    jq = (ws * qs[:, None])[..., None] * Rrel  # (S, 23, 3)
+    hqq = np.bincount(p.s_group, (jq**2).sum((1, 2)), minlength=p.G) + p.scale_w**2
+    gq = np.bincount(p.s_group, (jq * rs).sum((1, 2)), minlength=p.G) + p.scale_w * r_scale
+    wrel = w2[..., None] * rel  # (S, 23, 3), w2 includes q^2
+    xq = np.zeros((p.G, J3))
+    _scatter_blocks(xq, p.s_group, (wrel - c[None, :, None] * wrel.sum(1, keepdims=True)).reshape(S, J3))
+    if not p.free_scale:
+        hqq, gq, xq = np.ones(p.G), np.zeros(p.G), np.zeros((p.G, J3))
+    Hpp_ext = np.zeros((p.G, J3 + 1, J3 + 1))
+    Hpp_ext[:, :J3, :J3] = Hpp
+    Hpp_ext[:, J3, :J3] = Hpp_ext[:, :J3, J3] = xq
+    Hpp_ext[:, J3, J3] = hqq
+    Hpp = Hpp_ext
+    gp = np.concatenate([gp, gq[:, None]], axis=1)
+    Hcp = np.concatenate([Hcp, np.zeros((p.G, p.V, nc, 1))], axis=3)
 
     # --- focal priors
     for vv in range(p.V):
@@ -249,7 +278,7 @@ def _normal_equations(p: _Problem, cams, R0, X, free_cam):
         Hcc[vv][fixed, fixed] = 1.0
     gc[~free_cam] = 0.0
     Hcp[:, ~free_cam] = 0.0
-    return Hcc, Hcp, Hpp, gc, gp, _robust_cost(r_obs, r_shape, r_prior, p.huber), w_obs
+    return Hcc, Hcp, Hpp, gc, gp, _robust_cost(r_obs, r_shape, r_prior, r_scale, p.huber), w_obs
 
 
 def _solve(Hcc, Hcp, Hpp, gc, gp, lam):
@@ -268,7 +297,7 @@ def _solve(Hcc, Hcp, Hpp, gc, gp, lam):
     rhs = -gc.reshape(n) + np.einsum("gnj,gj->n", BHi, gp)
     dc = np.linalg.solve(S + 1e-12 * np.eye(n), rhs)
     dp = -np.einsum("gij,gj->gi", Hpp_inv, gp + np.einsum("gnj,n->gj", B, dc))
-    return dc.reshape(V, nc), dp.reshape(G, NUM_JOINTS, 3), S
+    return dc.reshape(V, nc), dp[:, :-1].reshape(G, NUM_JOINTS, 3), dp[:, -1], S
 
 
 def bundle_adjust(
@@ -286,6 +315,7 @@ def bundle_adjust(
     focal_prior_px: np.ndarray | None = None,
     focal_prior_rel_std: np.ndarray | None = None,
     shape_std_m: float = 0.1,
+    group_scale_std: float | None = None,
     min_score: float = 0.2,
     huber: float = 2.5,
     max_iterations: int = 40,
@@ -304,6 +334,10 @@ def bundle_adjust(
         square_pixels: one focal per view (fx = fy) when True.
         focal_prior_px, focal_prior_rel_std: (V,) optional priors on the focal lengths (``inf`` std: none).
         shape_std_m: std of the lifted poses' joints (per coordinate), metres.
+        group_scale_std: when given, every group's lifted poses are compared with its keypoints up to a scale
+            ``q`` (the lifter's error of that person's size, shared by its views), with the prior
+            ``log q ~ N(0, group_scale_std^2)``: the metric scale of the scene is then the (geometric) mean of
+            the lifted sizes and a single person's size error no longer pulls the cameras. None: ``q = 1``.
         min_score: keypoints below this 2D confidence are not used.
         huber: Huber threshold in standard deviations.
         max_iterations: LM iterations.
@@ -333,6 +367,7 @@ def bundle_adjust(
         o_w=np.sqrt(sc[d_idx, j_idx]) / sigma_px[d_idx],
         s_group=grp, s_view=view, s_joints=lifted.joints_cam_m[rows], shape_w=1.0 / shape_std_m,
         prior_log_f=np.nan_to_num(prior_f), prior_w=prior_w, huber=huber,
+        scale_w=1.0 / group_scale_std if group_scale_std else 0.0, free_scale=bool(group_scale_std),
     )
     nf = 1 if square_pixels else 2
     nc = nf + 6
@@ -345,19 +380,20 @@ def bundle_adjust(
     cams[:, nf + 3 :] = t_cam_from_world_m
     R0 = np.asarray(R_cam_from_world, dtype=np.float64).copy()
     X = np.asarray(points_world_m, dtype=np.float64).copy()
+    log_q = np.zeros(G)
     free = np.ones((V, nc), bool)
     free[0, nf:] = False
 
     lam, converged, it = 1e-3, False, 0
-    Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, free)
+    Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
     for it in range(1, max_iterations + 1):
         improved = False
         for _ in range(10):
-            dc, dp, S = _solve(Hcc, Hcp, Hpp, gc, gp, lam)
-            new_cams, new_X = cams + dc, X + dp
+            dc, dp, dq, S = _solve(Hcc, Hcp, Hpp, gc, gp, lam)
+            new_cams, new_X, new_q = cams + dc, X + dp, log_q + dq
             # fold the rotation increment into R0 so the increment parameters stay near zero
-            r_obs, r_shape, r_prior, _ = _residuals(prob, new_cams, R0, new_X)
-            new_cost = _robust_cost(r_obs, r_shape, r_prior, huber)
+            r_obs, r_shape, r_prior, r_scale, _ = _residuals(prob, new_cams, R0, new_X, new_q)
+            new_cost = _robust_cost(r_obs, r_shape, r_prior, r_scale, huber)
             if np.isfinite(new_cost) and new_cost < cost:
                 improved = True
                 break
@@ -367,22 +403,23 @@ def bundle_adjust(
             break
         R0 = rotvec_to_rotmat(new_cams[:, nf : nf + 3]) @ R0
         new_cams[:, nf : nf + 3] = 0.0
-        cams, X = new_cams, new_X
+        cams, X, log_q = new_cams, new_X, new_q
         lam = max(lam / 5.0, 1e-7)
         old = cost
-        Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, free)
+        Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
         if (old - cost) / max(old, 1e-12) < tolerance:
             converged = True
             break
-    _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
+    _, _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
     cov = np.linalg.pinv(S)
     f_var = np.array([cov[v * nc, v * nc] for v in range(V)])
     fx, fy, R, t = _unpack(prob, cams, R0)
-    r_obs, _, _, _ = _residuals(prob, cams, R0, X)
+    r_obs, _, _, _, _ = _residuals(prob, cams, R0, X, log_q)
     err_px = np.linalg.norm(r_obs / prob.o_w[:, None], axis=1)
     inl = w_obs >= 1.0
     rms = np.array([np.sqrt(np.mean(err_px[(prob.o_view == v) & inl] ** 2)) if np.any((prob.o_view == v) & inl)
                     else np.nan for v in range(V)])
     logger.info("bundle adjustment: %d groups, %d keypoints, %d iterations, cost %.4g, rms %s px", G, len(err_px), it,
                 cost, np.round(rms, 2))
-    return BundleResult(fx, fy, R, t, X, np.sqrt(np.maximum(f_var, 0.0)), rms, float(inl.mean()), it, converged)
+    return BundleResult(fx, fy, R, t, X, np.sqrt(np.maximum(f_var, 0.0)), rms, float(inl.mean()), it, converged,
+                        np.exp(log_q))

@@ -13,6 +13,11 @@ priors on the focal lengths (the single-view estimates, weighted by their uncert
 linear least-squares problem, solved with Cauchy-reweighting so that wrongly matched pairs drop out. Where
 views look at the people from different directions, one view's depth (focal-dependent) is another's lateral
 position (focal-free), which fixes the focal lengths; a uniform body-size error only scales the scene.
+
+A lifter does not know a person's size, though, and a per-person size error puts all of that person's roots too
+far or too near by one factor; in the regressors it attenuates the focal lengths (errors in variables). By
+default every pair therefore also gets a size factor (:func:`solve_focals_translations`, ``person_scale_std``),
+which makes the problem bilinear: it is finished by Gauss-Newton from the linear solution.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix, diags
+from scipy.sparse import coo_matrix, diags, hstack
 
 from humancal.calibration.types import LiftedPoses
 from humancal.detections import DenseDetections
@@ -121,11 +126,12 @@ class FocalTranslationSolution:
     Attributes:
         focal_px: (V,) focal lengths, pixels.
         t_cam_from_world_m: (V, 3) translations (camera 0 at the origin), metres.
-        residual_m: (M,) world distance between the two roots of each pair, metres.
+        residual_m: (M,) world distance between the two roots of each pair (after its size correction), metres.
         inlier: (M,) pairs consistent with the solution.
         focal_rel_std: (V,) relative standard deviation of each focal from the normal equations.
         focal_rel_std_data: (V,) the same without the focal priors: how much the pairs alone say (``inf``-like
             large values flag a focal the pairs cannot see, e.g. a camera looking straight down).
+        pair_scale: (M,) the size correction of each pair's person (1 where not estimated or not finite).
     """
 
     focal_px: np.ndarray
@@ -134,6 +140,7 @@ class FocalTranslationSolution:
     inlier: np.ndarray
     focal_rel_std: np.ndarray
     focal_rel_std_data: np.ndarray
+    pair_scale: np.ndarray | None = None
 
 
 def solve_focals_translations(
@@ -149,8 +156,19 @@ def solve_focals_translations(
     floor_std_m: float = 0.05,
     iterations: int = 8,
     inlier_sigma: float = 3.0,
+    person_scale_std: float | None = 0.1,
 ) -> FocalTranslationSolution:
-    """Joint linear solve of all focal lengths and translations from candidate cross-view pairs.
+    """Joint solve of all focal lengths and translations from candidate cross-view pairs.
+
+    With ``person_scale_std`` (the default), every pair also gets an unknown size correction ``s`` of its
+    person: a lifter sees body proportions, not body size, so a person's roots are all too far (or too near) by
+    the same factor in every view. That per-person error is shared by both roots of a pair, and left in the
+    regressors it attenuates the focal lengths (errors in variables: the people's depths spread by only about
+    10 % of their distance, comparable to the spread of adult heights). The pair constraint becomes
+    ``s (R_a^T T_a(f_a) - R_b^T T_b(f_b)) = R_a^T t_a - R_b^T t_b``, bilinear; it is solved by Gauss-Newton
+    (the per-pair scales eliminated by a Schur complement), started from the linear solution at ``s = 1``, with
+    a prior ``log s ~ N(0, person_scale_std^2)`` that also fixes the overall scale. ``None`` (or 0) gives the
+    purely linear solve with ``s = 1``.
 
     Args:
         roots: root positions of all detections (any focal; only ``zeta`` and the lateral part are used).
@@ -159,10 +177,11 @@ def solve_focals_translations(
         R_cam_from_world: (V, 3, 3) rotations (camera 0 = identity).
         focal_prior_px: (V,) prior focal lengths, pixels.
         focal_prior_rel_std: (V,) their relative std (``inf`` for none).
-        depth_rel_std: relative std of a root's depth (body-size error), scales each pair's weight.
+        depth_rel_std: relative std of a root's depth (besides the per-person size), scales each pair's weight.
         floor_std_m: std added to every root, metres.
-        iterations: Cauchy reweighting passes.
+        iterations: Cauchy reweighting passes (each with one Gauss-Newton step when the scales are estimated).
         inlier_sigma: pairs within this many standard deviations are inliers.
+        person_scale_std: prior std of the log size correction of each pair's person (None: no correction).
 
     Returns:
         :class:`FocalTranslationSolution`.
@@ -204,28 +223,83 @@ def solve_focals_translations(
     E_normal = (Es.T @ Es).toarray()
     E_rhs = Es.T @ b_extra
     gauge = Es[:3]
-    for it in range(iterations + 1):
-        w2 = np.repeat(weight**2, 3)
-        data_normal = (Ps.T @ diags(w2) @ Ps).toarray()
-        normal = data_normal + E_normal
-        x = col_scale @ np.linalg.lstsq(normal, Ps.T @ (w2 * rhs.ravel()) + E_rhs, rcond=None)[0]
-        res_m = (A_pairs @ x - rhs.ravel()).reshape(M, 3)
-        r = np.linalg.norm(res_m, axis=1) / (np.sqrt(3.0) * sigma)  # in units of the pair's std
-        if it < iterations:
-            weight = 1.0 / (sigma * np.sqrt(1.0 + (r / 2.0) ** 2))  # Cauchy
+    Pf, Pt = Ps[:, :V], Ps[:, V:]
+    scaled = bool(person_scale_std) and M > 0
+    prior_s = 1.0 / person_scale_std**2 if scaled else 0.0
+    log_q = np.zeros(M)  # q = 1 / s: the residuals are in the lifted poses' units, so that (q, t) -> (q / c, c t)
+    y = None  # leaves them unchanged and only the prior fixes the overall scale (no shrinkage towards 0)
+    robust = 1.0  # residual scale relative to sigma, estimated in stage 2
+    stage1_inlier = np.ones(M, bool)
+    # stage 1: s = 1, linear, Cauchy-reweighted (finds grossly wrong pairs); stage 2 (scales estimated): Gauss-Newton
+    # steps from the stage-1 solution over the stage-1 inliers, Cauchy-reweighted with a robust (median) residual
+    # scale: without the per-person size error the roots agree far better than ``sigma`` says
+    for estimate_scale in [False, True] if scaled else [False]:
+        if estimate_scale:
+            stage1_inlier = r_norm < inlier_sigma
+            if stage1_inlier.sum() < 2:  # nothing to refine: keep the linear solution
+                break
+            weight = np.where(stage1_inlier, 1.0 / sigma, 0.0)
+            stage1 = (y.copy(), res_m.copy(), r_norm.copy(), reduced_data.copy())
+        for it in range(iterations + 1):
+            w2 = np.repeat(weight**2, 3)
+            if not estimate_scale:
+                data_normal = (Ps.T @ diags(w2) @ Ps).toarray()
+                normal = data_normal + E_normal
+                y = np.linalg.lstsq(normal, Ps.T @ (w2 * rhs.ravel()) + E_rhs, rcond=None)[0]
+                reduced_data = data_normal
+            else:
+                # one Gauss-Newton step in (y, log q), the pair scales eliminated (each is a scalar block)
+                q_rep = np.repeat(np.exp(log_q), 3)
+                baseline = Pt @ y[V:]  # (3M,) R_b^T t_b - R_a^T t_a of each pair
+                r = Pf @ y[:V] - rhs.ravel() + q_rep * baseline
+                Jx = hstack([Pf, diags(q_rep) @ Pt]).tocsr()
+                jq = (q_rep * baseline).reshape(M, 3)  # d r / d log q_p
+                Jq = coo_matrix((jq.ravel(), (np.arange(3 * M), np.repeat(np.arange(M), 3))),
+                                shape=(3 * M, M)).tocsr()
+                data_normal = (Jx.T @ diags(w2) @ Jx).toarray()
+                H_xq = (Jx.T @ diags(w2) @ Jq).toarray()  # (n, M)
+                h_q = (w2.reshape(M, 3) * jq**2).sum(1) + prior_s
+                g_x = Jx.T @ (w2 * r) + E_normal @ y - E_rhs
+                g_q = Jq.T @ (w2 * r) + prior_s * log_q
+                reduced_data = data_normal - (H_xq / h_q) @ H_xq.T
+                normal = reduced_data + E_normal
+                dy = np.linalg.lstsq(normal, -(g_x - H_xq @ (g_q / h_q)), rcond=None)[0]
+                dq = -(g_q + H_xq.T @ dy) / h_q
+                y = y + dy
+                log_q = log_q + np.clip(dq, -0.3, 0.3)
+            x = col_scale @ y
+            q_rep = np.repeat(np.exp(log_q), 3)
+            res_m = (A_pairs[:, :V] @ x[:V] - rhs.ravel() + q_rep * (A_pairs[:, V:] @ x[V:])).reshape(M, 3)
+            r_norm = np.linalg.norm(res_m, axis=1) / (np.sqrt(3.0) * sigma)  # in units of the pair's std
+            if estimate_scale:
+                # median of |r| / (sqrt(3) sigma) for 3D Gaussian residuals of std sigma: 0.888
+                robust = float(np.clip(np.median(r_norm[stage1_inlier]) / 0.888, 0.1, 1.0))
+                r_norm = r_norm / robust
+            if it < iterations:
+                weight = 1.0 / (robust * sigma * np.sqrt(1.0 + (r_norm / 2.0) ** 2))  # Cauchy
+                if estimate_scale:
+                    weight = np.where(stage1_inlier, weight, 0.0)
+        if estimate_scale and not (np.isfinite(y).all() and np.isfinite(log_q).all()):
+            # a degenerate pair set: fall back on the linear solution at s = 1
+            y, res_m, r_norm, reduced_data = stage1
+            log_q[:] = 0.0
+            x = col_scale @ y
     residual_m = np.linalg.norm(res_m, axis=1)
     focal = x[:V]
     t = x[V:].reshape(V, 3)
-    # approximate std of the focal lengths from the (reweighted) normal equations, with and without the priors
-    cov = col_scale @ np.linalg.pinv(normal) @ col_scale
+    # approximate std of the focal lengths from the (reweighted, scales eliminated) normal equations, with and
+    # without the focal priors
+    cov = col_scale @ np.linalg.pinv(reduced_data + E_normal) @ col_scale
     f_std = np.sqrt(np.maximum(np.diag(cov)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
-    cov_data = col_scale @ np.linalg.pinv(data_normal + (gauge.T @ gauge).toarray(), rcond=1e-12) @ col_scale
+    cov_data = col_scale @ np.linalg.pinv(reduced_data + (gauge.T @ gauge).toarray(), rcond=1e-12) @ col_scale
     f_std_data = np.sqrt(np.maximum(np.diag(cov_data)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
     residual = np.full(len(rows_a), np.nan)
     residual[ok] = residual_m
     inlier = np.zeros(len(rows_a), bool)
-    inlier[ok] = r < inlier_sigma
-    return FocalTranslationSolution(focal, t, residual, inlier, f_std, f_std_data)
+    inlier[ok] = (r_norm < inlier_sigma) & stage1_inlier
+    pair_scale = np.ones(len(rows_a))
+    pair_scale[ok] = np.exp(-log_q)
+    return FocalTranslationSolution(focal, t, residual, inlier, f_std, f_std_data, pair_scale)
 
 
 def resect_focal_translation(

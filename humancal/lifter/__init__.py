@@ -14,7 +14,13 @@ Example:
 from humancal.lifter.cameras import sample_virtual_cameras
 from humancal.lifter.config import LifterConfig, SampleConfig, VirtualCameraRanges, training_noise
 from humancal.lifter.data import LifterSamples, check_clips, clip_heights_m, synthesize_samples
-from humancal.lifter.evaluate import evaluate_lifter, evaluate_predictions
+from humancal.lifter.evaluate import (
+    HELD_OUT_CMU_SUBJECTS,
+    evaluate_lifter,
+    evaluate_predictions,
+    held_out_report,
+    split_held_out,
+)
 from humancal.lifter.features import (
     ROOT_JOINTS,
     NormalizedDetections,
@@ -26,7 +32,9 @@ from humancal.lifter.features import (
 from humancal.lifter.infer import CHECKPOINT_FORMAT, LiftedPoses, Lifter, lift_detections, lift_features, load_lifter
 from humancal.lifter.model import LifterNet
 from humancal.lifter.pose_cues import height_chain_m, height_from_pose_m, upright_score
-from humancal.lifter.train import checkpoint_num_bytes, mpjpe_loss_m, train_lifter
+from humancal.lifter.plot import plot_training_history
+from humancal.lifter.table import lift_detections_table, lifted_from_table, lifted_to_table
+from humancal.lifter.train import checkpoint_digest, checkpoint_num_bytes, mpjpe_loss_m, train_lifter
 
 __all__ = [
     "CHECKPOINT_FORMAT",
@@ -40,7 +48,11 @@ __all__ = [
     "R_crop_from_cam",
     "SampleConfig",
     "VirtualCameraRanges",
+    "HELD_OUT_CMU_SUBJECTS",
     "check_clips",
+    "checkpoint_digest",
+    "held_out_report",
+    "split_held_out",
     "checkpoint_num_bytes",
     "clip_heights_m",
     "evaluate_lifter",
@@ -48,10 +60,14 @@ __all__ = [
     "height_chain_m",
     "height_from_pose_m",
     "lift_detections",
+    "lift_detections_table",
+    "lifted_from_table",
+    "lifted_to_table",
     "lift_features",
     "load_lifter",
     "mpjpe_loss_m",
     "normalize_detections",
+    "plot_training_history",
     "root_relative",
     "rotate_crop_to_camera",
     "sample_virtual_cameras",

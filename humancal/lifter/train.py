@@ -11,6 +11,8 @@ weights, bit for bit, on the same machine and thread count. The global torch ran
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 import math
 import time
@@ -26,7 +28,7 @@ from humancal.lifter.evaluate import evaluate_predictions
 from humancal.lifter.infer import CHECKPOINT_FORMAT, lift_features
 from humancal.lifter.model import LifterNet
 
-__all__ = ["mpjpe_loss_m", "train_lifter", "checkpoint_num_bytes"]
+__all__ = ["mpjpe_loss_m", "train_lifter", "checkpoint_digest", "checkpoint_num_bytes"]
 
 logger = logging.getLogger(__name__)
 
@@ -50,6 +52,23 @@ def _learning_rate(config: LifterConfig, step: int, total_steps: int) -> float:
 
 def _subjects(clips: Sequence[tuple[str, np.ndarray]]) -> list[str]:
     return sorted({subject for subject, _ in clips})
+
+
+def checkpoint_digest(checkpoint: dict[str, Any]) -> str:
+    """Hex SHA-256 of what a checkpoint computes: its weights (in key order), config and subjects.
+
+    Run-dependent entries (``training_time_s``) are left out, so two trainings with the same data, config and
+    seed give the same digest, and a change of any of them gives another.
+    """
+    digest = hashlib.sha256()
+    for name in sorted(checkpoint["state_dict"]):
+        tensor = checkpoint["state_dict"][name].detach().cpu().contiguous()
+        digest.update(name.encode())
+        digest.update(str(tuple(tensor.shape)).encode())
+        digest.update(tensor.numpy().tobytes())
+    digest.update(json.dumps([checkpoint["config"], list(checkpoint["train_subjects"]),
+                              list(checkpoint["val_subjects"])], sort_keys=True, default=str).encode())
+    return digest.hexdigest()
 
 
 def checkpoint_num_bytes(checkpoint: dict[str, Any]) -> int:

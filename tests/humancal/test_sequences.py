@@ -17,7 +17,7 @@ def test_packaged_config_has_the_demo_sequence():
 
 def test_available_sequences_need_their_data_folder(tmp_path):
     specs = load_datasets_config()
-    assert {s.key for s in available_sequences(specs, None)} == {"synthetic__demo", "synthetic__tiny"}
+    assert {s.key for s in available_sequences(specs, None)} == {"synthetic__demo", "synthetic__tiny", "synthetic__benchmark"}
     (tmp_path / "shelf_4dassoc").mkdir()
     assert "shelf__test" in {s.key for s in available_sequences(specs, tmp_path)}
 

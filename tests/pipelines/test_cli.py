@@ -38,6 +38,19 @@ def test_report_prints_stored_tables_as_csv(tmp_path, monkeypatch, capsys):
         main(["report", "--partition", "x__y"])
 
 
+def test_report_includes_the_lifters_held_out_table(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    (tmp_path / "artifacts" / "metric_tables").mkdir(parents=True)
+    row = {"dataset": ["cmu_mocap"], "sequence": ["held_out_02_14"], "method": ["lifter"], "metric": ["pa_mpjpe_mm"],
+           "value": [49.5], "unit": ["mm"]}
+    pd.DataFrame(row).to_parquet(tmp_path / "artifacts" / "lifter_heldout_metrics.parquet")
+    pd.DataFrame({**row, "dataset": ["d"], "sequence": ["s"]}).to_parquet(tmp_path / "artifacts" / "metric_tables" / "d__s.parquet")
+    assert main(["report", "--partition", "cmu_mocap__held_out_02_14", "--format", "csv"]) == 0
+    assert capsys.readouterr().out.splitlines()[1] == "cmu_mocap,held_out_02_14,lifter,pa_mpjpe_mm,49.5,mm"
+    assert main(["report", "--format", "csv"]) == 0
+    assert len(capsys.readouterr().out.splitlines()) == 3  # header, the held-out row, the sequence row
+
+
 def test_update_rejects_unknown_partition(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
     assert main(["update", "--partition", "mars__base"]) == 2

@@ -84,7 +84,12 @@ def test_two_views(ring_scene, simulate_views):
     dets, lifted, _ = simulate_views(ring_scene, cams, seed=5)
     _, result = _calibrate(dets, lifted, cams)
     err = camera_errors(result.cameras, cams)
-    assert np.all(err["focal_error_pct"] < 5.0) and np.all(err["angle_error_deg"] < 2.0)
+    # two cameras facing each other: depth in one view is depth in the other, so the focal lengths rest on the
+    # people's metric size, which is free per person (ExtrinsicsConfig.person_scale_std): a few per cent, and
+    # the reported uncertainty says so
+    std = result.diagnostics.per_view["focal_rel_std"].to_numpy()
+    assert np.all(err["focal_error_pct"] < 6.0) and np.all(err["focal_error_pct"] < 300 * std)
+    assert np.all(err["angle_error_deg"] < 2.0)
 
 
 def test_focal_of_a_view_without_upright_people_comes_from_the_others(ring_scene, ring_stand_in):

@@ -40,6 +40,44 @@ def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in)
     assert np.all(res.focal_rel_std < 0.02)
 
 
+def test_bundle_adjustment_with_wrong_people_sizes(ring_scene, ring_stand_in):
+    """Lifted poses of each person scaled by that person's size error: the group scales absorb it."""
+    d, pid = ring_stand_in.detections, ring_stand_in.person_id
+    rig = list(ring_scene.rig)
+    V = len(rig)
+    size = np.array([0.88, 1.12, 0.93])
+    lifted = lift_ground_truth(ring_scene.keypoints_world_m, ring_scene.height_m, rig, d.frame, d.view, pid,
+                               np.zeros(len(d), bool), np.random.default_rng(0), joint_noise_m=0.03,
+                               height_noise_m=0.0, rotation_noise_deg=0.0, depth_flip_rate=0.0)
+    scaled = lifted.joints_cam_m * size[np.maximum(pid, 0)][:, None, None]
+    lifted = type(lifted)(scaled, lifted.height_m, lifted.upright_score, lifted.valid)
+    keys = {}
+    for row in np.flatnonzero(pid >= 0):
+        if d.frame[row] % 3 == 0:
+            keys.setdefault((d.frame[row], pid[row]), []).append(row)
+    groups = [np.array(g) for g in keys.values() if len(g) >= 2]
+    points = np.stack([ring_scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
+    R = np.stack([c.R_cam_from_world for c in rig])
+    t = np.stack([c.t_cam_from_world_m for c in rig])
+    f_true = np.array([c.K[0, 0] for c in rig])
+    f0 = f_true * np.array([1.0, 1.1, 0.9, 1.05])
+    pp = np.stack([c.K[:2, 2] for c in rig])
+    naive = bundle_adjust(d, lifted, groups, points, f0, f0, pp, R, t, shape_std_m=0.05)
+    assert np.max(np.abs(naive.fx_px / f_true - 1)) > 0.05  # the sizes pull the cameras without group scales
+    res = bundle_adjust(d, lifted, groups, points, f0, f0, pp, R, t, shape_std_m=0.05, group_scale_std=0.1)
+    assert np.all(np.abs(res.fx_px / f_true - 1) < 0.02), res.fx_px / f_true
+    assert np.all(np.abs(res.fx_px / f_true - 1) < 2.5 * res.focal_rel_std)  # as uncertain as it says
+    q = res.group_scale / size[np.array([pid[g[0]] for g in groups])]
+    assert np.std(np.log(q)) < 0.02  # each group's scale follows its person's size error
+    # the metric scale of the scene is the (geometric) mean of the lifted sizes: c = 1 / mean q
+    centres = -np.einsum("vji,vj->vi", res.R_cam_from_world, res.t_cam_from_world_m)
+    true_centres = np.stack([c.center_world_m for c in rig])
+    baseline = np.linalg.norm(centres[1:] - centres[0], axis=1)
+    ratio = baseline / np.linalg.norm(true_centres[1:] - true_centres[0], axis=1)
+    assert np.all(np.abs(ratio * np.exp(np.mean(np.log(q))) - 1) < 0.02), ratio
+    assert V == 4
+
+
 def test_floor_alignment_of_a_tilted_world(ring_scene):
     X = ring_scene.keypoints_world_m[:, ::3].reshape(-1, 23, 3)
     upright = upright_scores(X)
@@ -107,6 +145,26 @@ def test_upright_scores_separate_standing_from_crouching(ring_scene):
     if (act == codes["stand"]).any() and (act == codes["crouch"]).any():
         assert score[act == codes["stand"]].mean() > 0.6 > score[act == codes["crouch"]].mean()
     assert score.min() >= 0 and score.max() <= 1
+
+
+def test_standing_scores_need_no_camera(ring_scene):
+    """The floor's standing test reads body-internal geometry: any rotation of the world gives the same scores."""
+    from humancal.calibration.floor import standing_scores
+    from humancal.synthetic import ACTIVITIES
+
+    codes = {name: i for i, name in enumerate(ACTIVITIES)}
+    X, act = ring_scene.keypoints_world_m.reshape(-1, 23, 3), ring_scene.activity.reshape(-1)
+    score = standing_scores(X)
+    assert score.min() >= 0 and score.max() <= 1
+    still = np.isin(act, [codes["stand"], codes["gesture"]])
+    moving = np.isin(act, [codes["walk"], codes["crouch"]])
+    assert still.any() and moving.any()
+    assert score[still].mean() > 0.8 and score[moving].mean() < 0.4
+    R = Rotation.from_euler("xyz", [70, 10, 30], degrees=True).as_matrix()  # e.g. a steep camera's frame
+    assert np.allclose(standing_scores(X @ R.T + 3.0), score)
+    broken = X[:2].copy()
+    broken[:, 11] = np.nan  # a missing joint: not standing
+    assert np.all(standing_scores(broken)[np.isnan(broken).any((1, 2))] == 0)
 
 
 def test_plot_rigs_writes_a_png(tmp_path, ring_scene):

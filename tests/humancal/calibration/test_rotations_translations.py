@@ -105,7 +105,9 @@ def test_linear_solve_recovers_focal_lengths_and_translations(ring_scene, ring_s
     d = ring_stand_in.detections
     K = np.stack([c.K for c in ring_scene.rig])
     f_true = K[:, 0, 0]
-    roots = root_positions(d, exact, K * np.array([1.1, 1.1, 1.0])[:, None])  # computed at a wrong focal
+    K_wrong = K.copy()
+    K_wrong[:, [0, 1], [0, 1]] *= 1.1
+    roots = root_positions(d, exact, K_wrong)  # computed at a wrong focal (the principal point kept)
     pairs = pairwise_rotations(d, exact, 4, np.random.default_rng(0))
     ra = np.concatenate([p.rows_a for p in pairs])
     rb = np.concatenate([p.rows_b for p in pairs])
@@ -116,6 +118,48 @@ def test_linear_solve_recovers_focal_lengths_and_translations(ring_scene, ring_s
     same = ring_stand_in.person_id[ra] == ring_stand_in.person_id[rb]
     assert sol.inlier[same].mean() > 0.95 and sol.inlier[~same].mean() < 0.5
     assert np.all(sol.focal_rel_std_data < 0.05)
+
+
+def test_linear_solve_is_not_biased_by_the_people_sizes(ring_scene, ring_stand_in):
+    """A lifter knows body proportions, not size: every person's roots are too far (or near) by one factor.
+
+    Those per-person errors, shared by both roots of a pair, attenuate the focal lengths when left in the
+    regressors; the per-pair size correction removes them.
+    """
+    exact, true = _exact(ring_scene, ring_stand_in)
+    d = ring_stand_in.detections
+    K = np.stack([c.K for c in ring_scene.rig])
+    f_true = K[:, 0, 0]
+    # person p appears (1 + e_p) times too large in every view: its roots are that much too far
+    size = np.array([0.88, 1.12, 0.93])[np.maximum(ring_stand_in.person_id, 0)]
+    roots = root_positions(d, exact, K)
+    roots = type(roots)(roots.T_cam_m * size[:, None], roots.zeta_m_per_px * size, roots.rms_px)
+    ra, rb = d_pairs = _true_pairs(ring_stand_in)
+    Rg = np.stack([c.R_cam_from_world for c in ring_scene.rig])
+    R = Rg @ Rg[0].T
+    naive = solve_focals_translations(roots, d.view, ra, rb, R, f_true, np.full(4, np.inf), person_scale_std=None)
+    sol = solve_focals_translations(roots, d.view, ra, rb, R, f_true, np.full(4, np.inf))
+    assert np.max(np.abs(naive.focal_px / f_true - 1)) > 0.1  # the bias the size correction removes
+    assert np.all(np.abs(sol.focal_px / f_true - 1) < 0.02), sol.focal_px / f_true
+    scale = sol.pair_scale[sol.inlier] * np.sqrt(size[ra] * size[rb])[sol.inlier]  # true / lifted size
+    assert np.std(np.log(scale)) < 0.02  # the pairs' corrections follow the people's size errors
+    assert sol.inlier.mean() > 0.9 and len(d_pairs[0]) == len(ra)
+
+
+def _true_pairs(stand_in):
+    """All cross-view pairs of detections of the same true person in the same frame."""
+    d, pid = stand_in.detections, stand_in.person_id
+    ra, rb = [], []
+    rows = np.flatnonzero(pid >= 0)
+    key = d.frame[rows] * 1000 + pid[rows]
+    for k in np.unique(key):
+        r = rows[key == k]
+        for i in range(len(r)):
+            for j in range(i + 1, len(r)):
+                if d.view[r[i]] != d.view[r[j]]:
+                    ra.append(r[i])
+                    rb.append(r[j])
+    return np.array(ra), np.array(rb)
 
 
 def test_resection_with_known_rotation():

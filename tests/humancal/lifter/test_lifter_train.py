@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from humancal.lifter import CHECKPOINT_FORMAT, LifterConfig, checkpoint_num_bytes, load_lifter, train_lifter
+from humancal.lifter import (
+    CHECKPOINT_FORMAT,
+    LifterConfig,
+    checkpoint_digest,
+    checkpoint_num_bytes,
+    load_lifter,
+    train_lifter,
+)
 from humancal.lifter.infer import lift_features
 
 
@@ -62,6 +69,10 @@ def test_training_is_deterministic_given_the_seed(train_val_clips):
     assert [h["val_loss_m"] for h in history] == [h["val_loss_m"] for h in history_again]
     other, _ = train_lifter(train, val, config.replace(seed=1))
     assert not torch.equal(other["state_dict"]["head.weight"], first["state_dict"]["head.weight"])
+    # the digest (the pipeline's data version) follows the weights, not the run time
+    assert checkpoint_digest(first) == checkpoint_digest(again) != checkpoint_digest(other)
+    assert config.digest() == LifterConfig.tiny().replace(epochs=1, samples_per_epoch=1024,
+                                                          validation_samples=128).digest() != config.replace(seed=1).digest()
 
 
 def test_subjects_must_not_be_shared_between_training_and_validation(train_val_clips):

@@ -1,0 +1,162 @@
+"""Per sequence: lifted detections, then the camera initialisation from people (intrinsics, extrinsics)."""
+
+import tempfile
+import time
+from pathlib import Path
+
+import dagster as dg
+import numpy as np
+import pandas as pd
+import threadpoolctl
+
+from assets.common import png_metadata, sequence_asset, table_output
+from humancal.calibration import (
+    ExtrinsicsConfig,
+    IntrinsicsConfig,
+    estimate_extrinsics,
+    estimate_intrinsics,
+    intrinsics_from_table,
+    intrinsics_to_table,
+    plot_rigs,
+)
+from humancal.calibration.types import LiftedPoses as CalibrationLifted
+from humancal.camera import cameras_to_table
+from humancal.keypoints import NUM_JOINTS
+from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
+from humancal.validation import check_cameras_valid, check_focal_plausible, check_rig_geometry
+
+MIN_UPRIGHT_PER_VIEW = 20
+"""Below this many upright standing detections in a view, the intrinsics check warns."""
+
+INTRINSICS_CONFIG = IntrinsicsConfig(missing_upright="defer")
+"""A view without upright people is deferred to the multi-view focal recovery of the extrinsics step."""
+
+
+def _calibration_inputs(detections: pd.DataFrame):
+    dense, lifted = lifted_from_table(detections)
+    return dense, CalibrationLifted.from_lifter(lifted)
+
+
+def _image_sizes(views: pd.DataFrame) -> list[tuple[int, int]]:
+    rows = views.sort_values("view")
+    return list(zip(rows["width_px"].astype(int), rows["height_px"].astype(int)))
+
+
+def _single_threaded_blas():
+    """The calibration solves many small systems: multi-threaded BLAS only adds overhead there (measured 2-3x
+    slower on a busy 2-core machine)."""
+    return threadpoolctl.threadpool_limits(1)
+
+
+@sequence_asset("lifted_detections", code_version="1")
+def detections(context: dg.AssetExecutionContext, raw_detections: pd.DataFrame, lifter_checkpoint: dict) -> dg.Output:
+    """Every 2D detection with its lifted root-relative 3D pose (crop frame), height and upright score."""
+    start = time.perf_counter()
+    table = lift_detections_table(load_lifter(lifter_checkpoint), raw_detections, context.partition_key)
+    first = table.iloc[::NUM_JOINTS]  # one row per detection
+    lifted = first["lifted"].to_numpy(bool)
+    upright = first["upright_score"].to_numpy()[lifted]
+    context.log.info(f"lifted {lifted.sum()} of {len(first)} detections in {time.perf_counter() - start:.1f} s")
+    return table_output(
+        table, "lifted_detections", rows=len(table), detections=len(first), lifted=int(lifted.sum()),
+        upright_fraction=float(np.mean(upright >= 0.5)) if len(upright) else 0.0,
+        median_height_m=float(np.median(first["height_m"].to_numpy()[lifted])) if lifted.any() else float("nan"),
+        seconds=round(time.perf_counter() - start, 2),
+    )
+
+
+@sequence_asset(
+    "intrinsics",
+    code_version="2",
+    check_specs=[
+        dg.AssetCheckSpec("focal_plausible", asset="intrinsics",
+                          description="each well-conditioned single-view focal gives a 10-140 deg horizontal field "
+                                      "of view (ill-conditioned views are recovered by the extrinsics step)"),
+        dg.AssetCheckSpec("enough_upright_people", asset="intrinsics",
+                          description=f"at least {MIN_UPRIGHT_PER_VIEW} upright standing detections per view (warns)"),
+    ],
+)
+def intrinsics(context: dg.AssetExecutionContext, detections: pd.DataFrame, views: pd.DataFrame):
+    """Per view: focal length from the upright people's vertical vanishing point and heights (the paper's III-B),
+    with the diagnostics (inliers, vanishing point, camera height and tilt, conditioning)."""
+    start = time.perf_counter()
+    dense, lifted = _calibration_inputs(detections)
+    with _single_threaded_blas():
+        estimates = estimate_intrinsics(dense, lifted, _image_sizes(views), INTRINSICS_CONFIG)
+    table = intrinsics_to_table(context.partition_key, estimates)
+    seconds = time.perf_counter() - start
+    context.log.info(f"intrinsics of {len(estimates)} views in {seconds:.1f} s")
+    yield table_output(
+        table, "intrinsics", rows=len(table), seconds=round(seconds, 2),
+        ill_conditioned_views=int((table["status"] != "ok").sum()),
+        per_view=dg.MetadataValue.md(table.drop(columns="sequence").to_markdown(index=False, floatfmt=".3g")),
+    )
+    report = check_focal_plausible(table[table["status"] == "ok"])
+    flagged = table[table["status"] != "ok"]
+    note = f"; views {flagged['view'].tolist()} flagged {sorted(set(flagged['status']))}" if len(flagged) else ""
+    yield dg.AssetCheckResult(check_name="focal_plausible", passed=report.passed,
+                              description=report.description + note, metadata=report.figures)
+    few = table[table["num_candidates"] < MIN_UPRIGHT_PER_VIEW]
+    yield dg.AssetCheckResult(
+        check_name="enough_upright_people",
+        passed=few.empty,
+        severity=dg.AssetCheckSeverity.WARN,
+        description=("every view has enough upright standing detections" if few.empty else
+                     "; ".join(f"view {r.view}: {r.num_candidates} upright detections" for r in few.itertuples())),
+        metadata={"min_upright_detections": int(table["num_candidates"].min())},
+    )
+
+
+@sequence_asset(
+    "cameras",
+    code_version="2",
+    check_specs=[
+        dg.AssetCheckSpec("cameras_valid", asset="extrinsics",
+                          description="finite positive focal, principal point inside, right-handed rotations"),
+        dg.AssetCheckSpec("focal_plausible", asset="extrinsics",
+                          description="each focal gives a 10-140 deg horizontal field of view"),
+        dg.AssetCheckSpec("rig_geometry", asset="extrinsics",
+                          description="cameras above the floor, each with most people in front and in its image"),
+        dg.AssetCheckSpec("focal_constrained", asset="extrinsics",
+                          description="every focal determined to 5 % (relative std of the bundle adjustment; warns)"),
+    ],
+)
+def extrinsics(
+    context: dg.AssetExecutionContext, detections: pd.DataFrame, intrinsics: pd.DataFrame, views: pd.DataFrame
+):
+    """The calibrated cameras: rotations from aligned lifted poses, translations, focal lengths refined (and
+    recovered where single views could not observe them) by a multi-view bundle adjustment; world Z up, floor
+    at z = 0, metric scale from the people's heights."""
+    start = time.perf_counter()
+    dense, lifted = _calibration_inputs(detections)
+    with _single_threaded_blas():
+        result = estimate_extrinsics(dense, lifted, intrinsics_from_table(intrinsics), ExtrinsicsConfig())
+    table = cameras_to_table(result.cameras, context.partition_key)
+    seconds = time.perf_counter() - start
+    floor = result.diagnostics.floor
+    people = floor.floor_points_m if floor is not None else np.zeros((0, 3))
+    with tempfile.TemporaryDirectory() as tmp:
+        png = plot_rigs(result.cameras, None, people, Path(tmp) / "rig.png",
+                        title=f"{context.partition_key}: estimated cameras and people on the floor")
+        picture = png_metadata(png, "estimated rig")
+    per_view = result.diagnostics.per_view
+    context.log.info(f"extrinsics of {len(table)} views in {seconds:.1f} s")
+    yield table_output(
+        table, "cameras", rows=len(table), seconds=round(seconds, 2), rig=picture,
+        per_view=dg.MetadataValue.md(per_view.to_markdown(index=False, floatfmt=".3g")),
+        bundle_inlier_fraction=float(result.diagnostics.bundle_inlier_fraction),
+    )
+    for name, report in (("cameras_valid", check_cameras_valid(table)), ("focal_plausible", check_focal_plausible(table)),
+                         ("rig_geometry", check_rig_geometry(table, people))):
+        yield dg.AssetCheckResult(check_name=name, passed=report.passed, description=report.description,
+                                  metadata=report.figures)
+    loose = per_view[per_view["focal_status"] != "ok"]
+    yield dg.AssetCheckResult(
+        check_name="focal_constrained",
+        passed=loose.empty,
+        severity=dg.AssetCheckSeverity.WARN,
+        description=("every focal is determined to 5 %" if loose.empty else "; ".join(
+            f"view {r.view}: focal {r.focal_px:.0f} px +- {100 * r.focal_rel_std:.0f} % (too few matched people?)"
+            for r in loose.itertuples())),
+        metadata={"max_focal_rel_std": float(per_view["focal_rel_std"].max())},
+    )

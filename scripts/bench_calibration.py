@@ -1,0 +1,78 @@
+"""Run time of the camera initialisation (the ``intrinsics`` and ``extrinsics`` assets' library calls) on stored
+sequences.
+
+Reads each partition's stored ``detections`` (lifted) and ``views`` artifacts (materialize them first with
+``humancal update --partition P``) and times ``estimate_intrinsics`` and ``estimate_extrinsics`` with the
+pipeline's settings, single-threaded BLAS, ``--repeats`` times; prints the median and the spread, plus the size
+of the input. The lifting itself is timed too (``lift``: the ``detections`` asset, given the checkpoint).
+
+    python scripts/bench_calibration.py [--partition shelf__test --partition synthetic__benchmark] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import pandas as pd
+import threadpoolctl
+import torch
+
+from assets.calibration import INTRINSICS_CONFIG
+from humancal.calibration import ExtrinsicsConfig, LiftedPoses, estimate_extrinsics, estimate_intrinsics
+from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
+from pipelines.definitions import artifacts_root
+from resources.io_managers import partition_path
+
+
+def _read(asset: str, partition: str | None) -> pd.DataFrame:
+    path = partition_path(artifacts_root(), asset, partition)
+    if not path.exists():
+        raise SystemExit(f"bench_calibration: {path} is missing; run `humancal update --partition {partition}` first")
+    return pd.read_parquet(str(path))
+
+
+def _time(fn, repeats: int) -> tuple[float, float, object]:
+    seconds, out = [], None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out = fn()
+        seconds.append(time.perf_counter() - start)
+    return statistics.median(seconds), max(seconds) - min(seconds), out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--partition", action="append", help="stored partition (repeatable)")
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    partitions = args.partition or ["shelf__test", "synthetic__benchmark"]
+    torch.set_num_threads(1)
+    checkpoint_path = partition_path(artifacts_root(), "lifter_checkpoint", None, ".pt")
+    lifter = load_lifter(str(checkpoint_path)) if checkpoint_path.exists() else None
+    rows = []
+    for pk in partitions:
+        table, views = _read("detections", pk), _read("views", pk)
+        dense, lifted = lifted_from_table(table)
+        lifted = LiftedPoses.from_lifter(lifted)
+        sizes = list(zip(views.sort_values("view")["width_px"], views.sort_values("view")["height_px"]))
+        with threadpoolctl.threadpool_limits(1):
+            t_int, s_int, intrinsics = _time(lambda: estimate_intrinsics(dense, lifted, sizes, INTRINSICS_CONFIG),
+                                             args.repeats)
+            t_ext, s_ext, _ = _time(lambda: estimate_extrinsics(dense, lifted, intrinsics, ExtrinsicsConfig()),
+                                    args.repeats)
+        row = {"partition": pk, "views": len(sizes), "frames": int(len(set(dense.frame.tolist()))),
+               "detections": len(dense), "intrinsics_s": t_int, "intrinsics_spread_s": s_int,
+               "extrinsics_s": t_ext, "extrinsics_spread_s": s_ext}
+        if lifter is not None:
+            raw = _read("raw_detections", pk)
+            row["lift_s"] = _time(lambda: lift_detections_table(lifter, raw, pk), args.repeats)[0]
+        rows.append(row)
+        print(pd.DataFrame([row]).to_string(index=False, float_format=lambda v: f"{v:.2f}"), flush=True)
+    print("\nmedian of", args.repeats, "runs, seconds, one BLAS and one torch thread:")
+    print(pd.DataFrame(rows).to_string(index=False, float_format=lambda v: f"{v:.2f}"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,69 @@
+"""Plausibility checks of calibrated cameras: focal lengths, rig geometry, proper rotations."""
+
+import numpy as np
+import pandas as pd
+
+from humancal.camera import Camera, cameras_to_table
+from humancal.validation import check_cameras_valid, check_focal_plausible, check_rig_geometry
+
+
+def _look_at(centre, target, f=1000.0, size=(1920, 1080)) -> Camera:
+    """A camera at ``centre`` looking at ``target`` with image x horizontal (world Z up)."""
+    z = np.asarray(target, float) - centre
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    K = np.array([[f, 0, size[0] / 2], [0, f, size[1] / 2], [0, 0, 1.0]])
+    return Camera.from_center(K, np.stack([x, y, z]), np.asarray(centre, float), *size)
+
+
+def _ring(n=4, radius=5.0, height=2.5):
+    angles = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return [_look_at(np.array([radius * np.cos(a), radius * np.sin(a), height]), [0, 0, 1.0]) for a in angles]
+
+
+PEOPLE = np.array([[0.5, 0.3, 0.0], [-0.4, 0.6, 0.0], [0.0, -0.7, 0.0]])
+
+
+def test_a_ring_looking_at_its_people_passes_every_check():
+    table = cameras_to_table(_ring(), "s")
+    assert check_cameras_valid(table).passed
+    assert check_focal_plausible(table).passed
+    report = check_rig_geometry(table, PEOPLE)
+    assert report.passed, report.description
+    assert report.figures["min_people_in_view_fraction"] == 1.0
+
+
+def test_a_camera_below_the_floor_or_looking_away_fails():
+    cams = _ring()
+    cams[1] = _look_at(np.array([0.0, 5.0, -0.5]), [0, 0, -1.0])
+    cams[2] = _look_at(np.array([-5.0, 0.0, 2.5]), [-10.0, 0.0, 1.0])
+    report = check_rig_geometry(cameras_to_table(cams, "s"), PEOPLE)
+    assert not report.passed
+    assert "view 1: camera centre -0.50 m is not above the floor" in report.description
+    assert "view 2: only 0 % of the people" in report.description
+    assert not check_rig_geometry(cameras_to_table(_ring(), "s"), np.zeros((0, 3))).passed
+
+
+def test_a_mirrored_camera_is_not_right_handed():
+    table = cameras_to_table(_ring(), "s")
+    R = np.asarray(table.loc[0, "R_cam_from_world"]).reshape(3, 3).copy()
+    R[0] *= -1.0
+    table.at[0, "R_cam_from_world"] = R.ravel()
+    report = check_cameras_valid(table)
+    assert not report.passed and "view 0: rotation not proper" in report.description
+
+
+def test_focal_plausibility():
+    table = cameras_to_table(_ring(), "s")
+    table.loc[1, ["fx_px", "fy_px"]] = 50.0  # a 174 deg field of view
+    table.loc[2, "fy_px"] = 1500.0
+    table.loc[3, ["fx_px", "fy_px"]] = np.nan  # not known yet: skipped and counted
+    report = check_focal_plausible(table)
+    assert not report.passed
+    assert "view 1: focal 50 px gives a 174.0 deg horizontal field of view" in report.description
+    assert "view 2: fx 1000 px and fy 1500 px differ by more than 20 %" in report.description
+    assert report.figures["unknown_focal_views"] == 1.0
+    ok = check_focal_plausible(pd.concat([table.iloc[[0]], table.iloc[[3]]]))
+    assert ok.passed and "1 not known yet" in ok.description
