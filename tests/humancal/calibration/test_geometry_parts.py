@@ -10,17 +10,22 @@ from humancal.calibration.stand_in import lift_ground_truth, upright_scores
 from humancal.camera import Camera, project_points
 
 
-def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in):
-    d, lifted, pid = ring_stand_in.detections, ring_stand_in.lifted, ring_stand_in.person_id
-    rig = list(ring_scene.rig)
-    V = len(rig)
-    # groups = true identities (one person in one frame seen by >= 2 views), every 3rd frame
+def _true_groups(scene, d, pid):
+    """Groups of true identities (one person in one frame seen by >= 2 views), every 3rd frame, and the true
+    keypoints of each group."""
     keys = {}
     for row in np.flatnonzero(pid >= 0):
         if d.frame[row] % 3 == 0:
             keys.setdefault((d.frame[row], pid[row]), []).append(row)
     groups = [np.array(g) for g in keys.values() if len(g) >= 2]
-    points = np.stack([ring_scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
+    return groups, np.stack([scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
+
+
+def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in):
+    d, lifted, pid = ring_stand_in.detections, ring_stand_in.lifted, ring_stand_in.person_id
+    rig = list(ring_scene.rig)
+    V = len(rig)
+    groups, points = _true_groups(ring_scene, d, pid)
     rng = np.random.default_rng(0)
     R_true = np.stack([c.R_cam_from_world for c in rig])
     t_true = np.stack([c.t_cam_from_world_m for c in rig])
@@ -51,12 +56,7 @@ def test_bundle_adjustment_with_wrong_people_sizes(ring_scene, ring_stand_in):
                                height_noise_m=0.0, rotation_noise_deg=0.0, depth_flip_rate=0.0)
     scaled = lifted.joints_cam_m * size[np.maximum(pid, 0)][:, None, None]
     lifted = type(lifted)(scaled, lifted.height_m, lifted.upright_score, lifted.valid)
-    keys = {}
-    for row in np.flatnonzero(pid >= 0):
-        if d.frame[row] % 3 == 0:
-            keys.setdefault((d.frame[row], pid[row]), []).append(row)
-    groups = [np.array(g) for g in keys.values() if len(g) >= 2]
-    points = np.stack([ring_scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
+    groups, points = _true_groups(ring_scene, d, pid)
     R = np.stack([c.R_cam_from_world for c in rig])
     t = np.stack([c.t_cam_from_world_m for c in rig])
     f_true = np.array([c.K[0, 0] for c in rig])
