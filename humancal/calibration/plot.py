@@ -8,6 +8,7 @@ import numpy as np
 
 from humancal.calibration.alignment import align_rig
 from humancal.camera import Camera
+from humancal.plotting import pyplot, save_figure
 
 __all__ = ["plot_rigs"]
 
@@ -45,10 +46,7 @@ def plot_rigs(
     Returns:
         The path written.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     est = list(estimated)
     points = None if floor_points is None else np.asarray(floor_points, dtype=np.float64).reshape(-1, 3)
@@ -73,8 +71,4 @@ def plot_rigs(
     axes[0].legend(loc="best", fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    path = Path(path_png)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path_png, dpi=110)

@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from humancal.plotting import pyplot, save_figure
+
 __all__ = ["plot_training_history"]
 
 
@@ -19,10 +21,7 @@ def plot_training_history(history: Sequence[dict[str, Any]], path_png: str | Pat
     Returns:
         The path written.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     epochs = np.array([r["epoch"] for r in history])
     fig, (ax, ax_h) = plt.subplots(1, 2, figsize=(11, 4))
@@ -45,8 +44,4 @@ def plot_training_history(history: Sequence[dict[str, Any]], path_png: str | Pat
     ax_h.grid(True, lw=0.3)
     fig.suptitle(title)
     fig.tight_layout()
-    path = Path(path_png)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path_png, dpi=100)

@@ -9,6 +9,7 @@ import numpy as np
 
 from humancal.keypoints import CANONICAL_JOINTS, LIMB_INDEX
 from humancal.mocap import MocapClip
+from humancal.plotting import pyplot, save_figure
 from humancal.retarget.clips import RetargetedClip
 
 __all__ = ["plot_retarget"]
@@ -55,10 +56,7 @@ def plot_retarget(
     Raises:
         ValueError: no frames, a frame outside the retargeted clip, or clips of different names.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     if clip.name != retargeted.name:
         raise ValueError(f"plot_retarget: mocap clip {clip.name!r} and retargeted clip {retargeted.name!r} differ")
@@ -113,7 +111,4 @@ def plot_retarget(
     ]
     fig.legend(handles=handles, loc="lower center", ncol=2, fontsize=8)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
-    path = Path(path_png)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path_png, dpi=110)
