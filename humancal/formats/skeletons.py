@@ -11,7 +11,10 @@ a few more for the joints it lacks:
 ``pelvis``
     between the hips, as Shelf/Campus ground truth names it (SHELF15 joint 14).
 ``bottom_head``, ``top_head``
-    Shelf/Campus head joints (SHELF15 joints 12 and 13); ``top_head`` is also Halpe's ``Head``.
+    Shelf/Campus head joints (SHELF15 joints 12 and 13); ``top_head`` is also Halpe's ``Head`` and OpenPose
+    BODY_25B's ``HeadTop``.
+``upper_neck``
+    the top of the neck, under the chin (OpenPose BODY_25B ``UpperNeck``).
 ``face_NN``, ``left_hand_NN``, ``right_hand_NN``
     the face and hand points of COCO-WholeBody (never used downstream).
 
@@ -112,6 +115,17 @@ _BODY25_JOINTS = (
     "left_big_toe", "left_small_toe", "left_heel", "right_big_toe", "right_small_toe", "right_heel",
 )  # fmt: skip
 
+_BODY25B_JOINTS = (
+    "nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder",
+    "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip",
+    "left_knee", "right_knee", "left_ankle", "right_ankle",
+) + (
+    "upper_neck", "top_head",
+    "left_big_toe", "left_small_toe", "left_heel", "right_big_toe", "right_small_toe", "right_heel",
+)  # fmt: skip
+"""OpenPose's experimental BODY_25B model: the COCO-17 points in COCO order, then upper neck, head top and the
+6 foot points. Also 25 points, but in another order than BODY_25: never tell them apart by length alone."""
+
 _COCO18_JOINTS = (
     "nose", "neck", "right_shoulder", "right_elbow", "right_wrist", "left_shoulder", "left_elbow", "left_wrist",
     "right_hip", "right_knee", "right_ankle", "left_hip", "left_knee", "left_ankle",
@@ -160,6 +174,13 @@ SKELETONS: dict[str, Skeleton] = {
             _sides(*_ARM, *_LEG, *_FACE, *_FOOT, ("neck", "{side}_shoulder"), ("mid_hip", "{side}_hip"))
             + (("neck", "nose"), ("neck", "mid_hip")),
             "OpenPose BODY_25 (pose_keypoints_2d of the BODY_25 model): COCO joints + neck, mid-hip and 6 foot points",
+        ),
+        _skeleton(
+            "body25b",
+            _BODY25B_JOINTS,
+            _COCO17_LIMBS + _sides(*_FOOT) + (("upper_neck", "top_head"),)
+            + _sides(("upper_neck", "{side}_shoulder")),
+            "OpenPose BODY_25B (experimental model): COCO-17 in COCO order + upper neck, head top and 6 foot points",
         ),
         _skeleton(
             "coco18",

@@ -3,14 +3,16 @@
 ``read_detections`` dispatches on ``format``:
 
 ``"openpose"``
-    one OpenPose JSON folder per view (:mod:`humancal.formats.detections.openpose`); BODY_25 or COCO-18.
+    one OpenPose JSON folder per view (:mod:`humancal.formats.detections.openpose`); BODY_25, BODY_25B (named:
+    both have 25 points) or COCO-18.
 ``"coco"``
     one COCO-style keypoint JSON file per view (:mod:`humancal.formats.detections.coco`); COCO-17, Halpe-26 or
     COCO-WholeBody.
 
 The returned table carries the image size of every view in ``table.attrs["image_size_px"]``
 (``{view: (width_px, height_px)}``), taken from the files when they have it, else from the ``image_size`` argument,
-which is then required.
+which is then required, and the number of placeholder person entries (empty keypoint lists) skipped per view in
+``table.attrs["skipped_placeholders"]``.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from humancal.formats.detections.coco import COCO_SKELETONS, read_coco_keypoints
 from humancal.formats.detections.openpose import OPENPOSE_SKELETONS, read_openpose, write_openpose
 from humancal.formats.detections.table import (
     IMAGE_SIZE_ATTR,
+    PLACEHOLDERS_ATTR,
     detections_from_arrays,
     detections_to_arrays,
     image_sizes_by_view,
@@ -36,6 +39,7 @@ from humancal.tables import empty_table
 __all__ = [
     "DETECTION_FORMATS",
     "IMAGE_SIZE_ATTR",
+    "PLACEHOLDERS_ATTR",
     "COCO_SKELETONS",
     "OPENPOSE_SKELETONS",
     "read_detections",
@@ -72,14 +76,16 @@ def read_detections(
         image_size: (width_px, height_px) for every view, one pair per view (sequence in view order or mapping by
             view). Required when the files do not carry the size (OpenPose, COCO results lists); when both exist
             they must agree.
-        skeleton: the files' skeleton (``None``: inferred from the array length).
+        skeleton: the files' skeleton (``None``: inferred from the array length, an error when two skeletons have
+            that length, as BODY_25 and BODY_25B do).
         frame_from: how frame numbers are found: ``"auto"``, ``"name_number"`` (the number in the file or image
             name), ``"name_order"`` (the rank of the name in sorted order), or for ``"coco"`` also ``"image_id"``
             (integer image ids are the frames); see the format's module.
 
     Returns:
         The canonical detections table, sorted by frame, view, det_id and joint, with
-        ``attrs["image_size_px"] = {view: (width_px, height_px)}``.
+        ``attrs["image_size_px"] = {view: (width_px, height_px)}`` and ``attrs["skipped_placeholders"] =
+        {view: count}``.
 
     Raises:
         FormatError: unknown format (the message lists the known ones), a bad file, a missing or contradicting
@@ -99,13 +105,15 @@ def read_detections(
     if format == "openpose":
         table = read_openpose(paths, sequence=sequence, skeleton=skeleton, frame_from=frame_from)
         from_files: dict[int, tuple[int, int]] = {}
+        placeholders = dict(table.attrs.get(PLACEHOLDERS_ATTR, {}))
     else:
-        parts, from_files = [], {}
+        parts, from_files, placeholders = [], {}, {}
         for v, path in paths.items():
             part, size = read_coco_keypoints(
                 path, view=v, sequence=sequence, skeleton=skeleton, frame_from=frame_from
             )
             parts.append(part)
+            placeholders[v] = part.attrs.get(PLACEHOLDERS_ATTR, {}).get(v, 0)
             if size is not None:
                 from_files[v] = size
         non_empty = [p for p in parts if len(p)]
@@ -123,4 +131,5 @@ def read_detections(
             expected = f"image_size=(width_px, height_px) (the {format} file(s) of view {v} do not carry it)"
             raise FormatError(path, "image size", expected, "none")
     table.attrs[IMAGE_SIZE_ATTR] = sizes
+    table.attrs[PLACEHOLDERS_ATTR] = placeholders
     return table

@@ -22,20 +22,26 @@ def skeleton_of_length(
         length: number of values in the array.
         given: the skeleton the caller expects (from the argument, or inferred from an earlier array); the length
             must match it.
-        candidates: skeleton names told apart by length when ``given`` is None.
+        candidates: skeleton names told apart by length when ``given`` is None; a length that fits several is
+            an error (never a guess).
         path, field: where the array comes from, for the message.
 
     Raises:
-        FormatError: the length does not match ``given``, or no candidate.
+        FormatError: the length does not match ``given``, fits no candidate, or fits several.
     """
     if given is not None:
         if length != 3 * given.num_joints:
             expected = f"{3 * given.num_joints} numbers ({given.num_joints} joints of '{given.name}' x 3)"
             raise FormatError(path, field, expected, f"{length} numbers")
         return given
-    for name in candidates:
-        if length == 3 * get_skeleton(name).num_joints:
-            return get_skeleton(name)
+    fits = [name for name in candidates if length == 3 * get_skeleton(name).num_joints]
+    if len(fits) > 1:
+        # BODY_25 and BODY_25B both have 25 points in different orders: guessing would silently swap joints.
+        names = " and ".join(repr(f) for f in fits)
+        expected = f"a named skeleton (skeleton=, on the command line --skeleton): {length} numbers fit {names}"
+        raise FormatError(path, field, expected, "none")
+    if fits:
+        return get_skeleton(fits[0])
     counts = ", ".join(f"{3 * get_skeleton(n).num_joints} ({n})" for n in candidates)
     raise FormatError(path, field, f"{counts} numbers", f"{length} numbers")
 

@@ -13,7 +13,9 @@ Two layouts are read:
 
 J is 17 (COCO), 26 (Halpe, AlphaPose's full-body model) or 133 (COCO-WholeBody; only its body and foot points are
 kept), told apart by the array length or given. Entries whose ``category_id`` is present and not 1 (person) are
-skipped. det_id is the order of a person's entry among the entries of its image.
+skipped, and so are entries with an empty ``keypoints`` list (placeholders some trackers write; counted in the
+table's ``attrs["skipped_placeholders"]``). det_id is the order of a person's entry among the kept entries of its
+image.
 
 Frame numbers (``frame_from``): ``"image_id"`` uses integer image ids as frames; ``"name_number"`` takes the last
 number in the image's file name (``frame_000123.jpg`` -> 123); ``"name_order"`` ranks the distinct image names
@@ -34,7 +36,7 @@ import pandas as pd
 
 from humancal.formats._io import load_json
 from humancal.formats.detections._keypoints import checked_keypoints, skeleton_of_length
-from humancal.formats.detections.table import detections_from_arrays
+from humancal.formats.detections.table import PLACEHOLDERS_ATTR, detections_from_arrays
 from humancal.formats.errors import FormatError, missing_field
 from humancal.formats.joint_mapping import to_canonical
 from humancal.formats.skeletons import Skeleton, get_skeleton
@@ -69,7 +71,8 @@ def read_coco_keypoints(
         frame_from: how frame numbers are found (module docstring).
 
     Returns:
-        detections: the canonical detections table of this view.
+        detections: the canonical detections table of this view (``attrs["skipped_placeholders"]`` =
+            ``{view: placeholder entries skipped}``).
         image_size: (width_px, height_px) from a dataset file's ``images`` (all must agree), else ``None``.
 
     Raises:
@@ -83,6 +86,7 @@ def read_coco_keypoints(
     skel = None if skeleton is None else get_skeleton(skeleton)
     names = {img_id: img.get("file_name", str(img_id)) for img_id, img in images.items()}
     rows: list[tuple[object, np.ndarray]] = []
+    placeholders = 0
     for i, entry in enumerate(entries):
         field = f"{_entries_key(data)}[{i}]"
         if not isinstance(entry, dict):
@@ -97,6 +101,9 @@ def read_coco_keypoints(
         flat = entry["keypoints"]
         if not isinstance(flat, list):
             raise FormatError(path, f"{field}.keypoints", "a list of x, y, score numbers", type(flat).__name__)
+        if not flat:
+            placeholders += 1
+            continue
         skel = skeleton_of_length(len(flat), skel, COCO_SKELETONS, path, f"{field}.keypoints")
         person = checked_keypoints(flat, skel, path, f"{field}.keypoints")
         if isinstance(data, dict):  # a dataset file: visibility flags, not scores
@@ -112,6 +119,9 @@ def read_coco_keypoints(
         kp, sc = to_canonical(stacked[..., :2], stacked[..., 2], skel)  # type: ignore[arg-type]
         arrays.append((frame, view, kp, sc))
     table = detections_from_arrays(arrays, sequence, source=str(path))
+    if placeholders:
+        logger.info("%s: skipped %d placeholder entries without keypoints", path, placeholders)
+    table.attrs[PLACEHOLDERS_ATTR] = {view: placeholders}
     return table, _image_size(images, path)
 
 

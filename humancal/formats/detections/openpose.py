@@ -1,13 +1,22 @@
-"""OpenPose per-frame JSON: one folder per view, one ``*_keypoints.json`` file per frame.
+"""OpenPose per-frame JSON: one folder per view, one JSON file per frame.
 
 A file is ``{"version": ..., "people": [{"pose_keypoints_2d": [x0, y0, c0, x1, y1, c1, ...], ...}, ...]}`` with
-J = 25 (BODY_25 model) or 18 (COCO model) joints in pixels; a joint OpenPose did not find is written as
-``0, 0, 0``. OpenPose names the files ``<video name>_<frame:012d>_keypoints.json`` (frames from 0). The files
-carry no image size.
+J = 25 (BODY_25 or the experimental BODY_25B model, two different joint orders) or 18 (COCO model) joints in
+pixels; a joint OpenPose did not find is written as ``0, 0, 0``. OpenPose names the files
+``<video name>_<frame:012d>_keypoints.json`` (frames from 0); other tools write e.g. ``cam01.0000.json``. The
+files carry no image size.
 
-Reading: frame numbers come from the number before ``_keypoints.json`` when every file name has one
-(``frame_from="name_number"``), else from the sorted file order (``frame_from="name_order"``); ``"auto"`` picks
-the first that applies. det_id is a person's index in ``people``. Joints with confidence 0 have no row.
+Reading: every ``*.json`` file of a view folder is one frame. Its frame number is the number in the file name
+that changes from file to file (so the ``01`` of ``cam01_000000000007_keypoints.json`` or ``cam01.0007.json``,
+the same in every file, is not taken for the frame); with a single file, the last number of its name
+(``frame_from="name_number"``). When names carry no distinct numbers, frames are the sorted file order
+(``frame_from="name_order"``); ``"auto"`` picks the first that applies. Views may have different frames (a camera
+started late, a file missing): frames are matched by number, and an image without a file has no detections (the
+counts are logged); without frame numbers in the names the views must have the same number of files.
+det_id is a person's index among the entries of ``people`` that carry keypoints: an entry with an empty
+``pose_keypoints_2d`` list (a placeholder some trackers write) is skipped and counted (the table's
+``attrs["skipped_placeholders"]``, ``{view: count}``). Joints with confidence 0 have no row. A 25-point array
+fits two skeletons: ``skeleton=`` is then required ("body25" or "body25b"), never guessed.
 
 Writing: every table frame gets a file per view (frames with no detection get ``"people": []``), people in det_id
 order, so det_ids are renumbered 0..P-1 per image when the table has gaps. Canonical joints are mapped to the
@@ -29,7 +38,7 @@ import pandas as pd
 
 from humancal.formats._io import atomic_write_text, load_json
 from humancal.formats.detections._keypoints import checked_keypoints, skeleton_of_length
-from humancal.formats.detections.table import detections_from_arrays, detections_to_arrays
+from humancal.formats.detections.table import PLACEHOLDERS_ATTR, detections_from_arrays, detections_to_arrays
 from humancal.formats.errors import FormatError
 from humancal.formats.joint_mapping import from_canonical, to_canonical
 from humancal.formats.skeletons import Skeleton, get_skeleton
@@ -39,85 +48,116 @@ __all__ = ["OPENPOSE_SKELETONS", "list_openpose_frames", "read_openpose_file", "
 
 logger = logging.getLogger(__name__)
 
-OPENPOSE_SKELETONS = ("body25", "coco18")
-"""Skeletons an OpenPose ``pose_keypoints_2d`` array may hold; told apart by length."""
+OPENPOSE_SKELETONS = ("body25", "body25b", "coco18")
+"""Skeletons an OpenPose ``pose_keypoints_2d`` array may hold (BODY_25 and BODY_25B share a length)."""
 
-_FRAME_NUMBER = re.compile(r"(\d+)_keypoints\.json$")
+_NUMBER = re.compile(r"\d+")
 _SUFFIX = "_keypoints.json"
 
 FrameFrom = Literal["auto", "name_number", "name_order"]
 
 
+def _frame_numbers(names: list[str]) -> list[int] | None:
+    """The frame number in each file name, or None when the names carry no distinct frame numbers.
+
+    The frame is the number that varies between names at the same position (the camera number in
+    ``cam01_000000000007_keypoints.json`` stays the same); with one file, or names that do not share a layout,
+    the last number of each name.
+    """
+    groups = [_NUMBER.findall(Path(n).stem) for n in names]
+    if not groups or any(not g for g in groups):
+        return None
+    numbers = [int(g[-1]) for g in groups]
+    if len({len(g) for g in groups}) == 1:
+        varying = [i for i in range(len(groups[0])) if len({g[i] for g in groups}) > 1]
+        if varying:
+            numbers = [int(g[varying[-1]]) for g in groups]
+    return numbers if len(set(numbers)) == len(numbers) else None
+
+
+def _list_frames(folder: Path, frame_from: str) -> tuple[list[tuple[int, Path]], bool]:
+    """(frame number, file) pairs in frame order, and whether the numbers came from the names."""
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no such folder (expected one OpenPose JSON folder per view)")
+    if frame_from not in ("auto", "name_number", "name_order"):
+        raise ValueError(f"frame_from: expected 'auto', 'name_number' or 'name_order', got {frame_from!r}")
+    files = sorted(p for p in folder.iterdir() if p.suffix == ".json" and not p.name.startswith(".") and p.is_file())
+    if not files:
+        raise FormatError(folder, None, "OpenPose JSON files ('<video>_<frame:012d>_keypoints.json' or '*.json')", "none")
+    numbers = _frame_numbers([p.name for p in files])
+    if frame_from == "name_number" or (frame_from == "auto" and numbers is not None):
+        if numbers is None:
+            bad = next((p.name for p in files if not _NUMBER.search(p.stem)), None)
+            if bad is not None:
+                raise FormatError(folder / bad, None, "a file name with a frame number ('<name>_<frame>_keypoints.json')",
+                                  repr(bad))
+            raise FormatError(folder, None, "one file per frame number", "repeated frame numbers in the file names")
+        return sorted(zip(numbers, files)), True
+    if frame_from == "auto":
+        logger.info("%s: file names carry no distinct frame numbers; frames numbered in sorted file order", folder)
+    return list(enumerate(files)), False
+
+
 def list_openpose_frames(folder: str | Path, frame_from: FrameFrom = "auto") -> list[tuple[int, Path]]:
-    """The ``*_keypoints.json`` files of ``folder`` with their frame numbers, in frame order.
+    """The JSON files of one view's folder with their frame numbers, in frame order.
 
     Args:
         folder: one view's folder.
-        frame_from: ``"name_number"``: the number before ``_keypoints.json``; ``"name_order"``: the index in the
-            sorted file list; ``"auto"``: ``"name_number"`` when every file has a number and no number repeats,
-            else ``"name_order"``.
+        frame_from: ``"name_number"``: the number in the file name that varies from file to file (module
+            docstring); ``"name_order"``: the index in the sorted file list; ``"auto"``: ``"name_number"`` when
+            every name has one and no number repeats, else ``"name_order"``.
 
     Raises:
         FileNotFoundError: the folder does not exist.
-        FormatError: no keypoint file; a name without a number (``"name_number"``); a repeated frame number.
+        FormatError: no JSON file; a name without a number (``"name_number"``); a repeated frame number.
     """
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: no such folder (expected one OpenPose JSON folder per view)")
-    files = sorted(p for p in folder.iterdir() if p.name.endswith(_SUFFIX) and p.is_file())
-    if not files:
-        raise FormatError(folder, None, "OpenPose files named '*_keypoints.json'", "none")
-    if frame_from not in ("auto", "name_number", "name_order"):
-        raise ValueError(f"frame_from: expected 'auto', 'name_number' or 'name_order', got {frame_from!r}")
-    matches = [_FRAME_NUMBER.search(p.name) for p in files]
-    numbers = [int(m.group(1)) if m else None for m in matches]
-    by_name_ok = all(n is not None for n in numbers) and len(set(numbers)) == len(numbers)
-    if frame_from == "name_number" or (frame_from == "auto" and by_name_ok):
-        if not by_name_ok:
-            bad = next((p.name for p, n in zip(files, numbers) if n is None), None)
-            if bad is not None:
-                raise FormatError(folder / bad, None, "a file name '<name>_<frame number>_keypoints.json'", repr(bad))
-            repeated = sorted({n for n in numbers if numbers.count(n) > 1})
-            raise FormatError(folder, None, "one file per frame number", f"repeated frame number(s) {repeated[:5]}")
-        return sorted(zip(numbers, files))  # type: ignore[arg-type]
-    if frame_from == "auto":
-        logger.info("%s: file names carry no unique frame numbers; frames numbered in sorted file order", folder)
-    return list(enumerate(files))
+    return _list_frames(Path(folder), frame_from)[0]
+
+
+def _read_people(path: Path, skeleton: Skeleton | None) -> tuple[np.ndarray, Skeleton | None, int]:
+    """(people (P, J, 3), skeleton, number of placeholder entries skipped) of one file."""
+    data = load_json(path)
+    if not isinstance(data, dict) or not isinstance(data.get("people"), list):
+        got = "no 'people' key" if isinstance(data, dict) else type(data).__name__
+        raise FormatError(path, "people", "a JSON object with a 'people' list", got)
+    skel, people, placeholders = skeleton, [], 0
+    for p, person in enumerate(data["people"]):
+        field = f"people[{p}].pose_keypoints_2d"
+        flat = person.get("pose_keypoints_2d") if isinstance(person, dict) else None
+        if not isinstance(flat, list):
+            raise FormatError(path, field, "a list of x, y, confidence numbers", "nothing")
+        if not flat:
+            placeholders += 1
+            continue
+        skel = skeleton_of_length(len(flat), skel, OPENPOSE_SKELETONS, path, field)
+        people.append(checked_keypoints(flat, skel, path, field, score_name="confidence"))
+    if not people:
+        return np.zeros((0, 0 if skel is None else skel.num_joints, 3)), skel, placeholders
+    return np.stack(people), skel, placeholders
 
 
 def read_openpose_file(path: str | Path, skeleton: str | Skeleton | None = None) -> tuple[np.ndarray, Skeleton | None]:
     """The people of one OpenPose JSON file.
 
     Args:
-        path: the ``*_keypoints.json`` file.
-        skeleton: ``"body25"`` or ``"coco18"`` (or a Skeleton); ``None`` infers it from the array length.
+        path: the JSON file.
+        skeleton: ``"body25"``, ``"body25b"`` or ``"coco18"`` (or a Skeleton); ``None`` infers it from the array
+            length, which works for 18 points only (25 points fit two skeletons).
 
     Returns:
-        people: (P, J, 3) x_px, y_px, confidence (P may be 0).
+        people: (P, J, 3) x_px, y_px, confidence (P may be 0; placeholder entries with an empty keypoint list are
+            left out).
         skeleton: the skeleton of the arrays (``None`` when the file has no people and none was given).
 
     Raises:
         FormatError: invalid JSON; no ``people`` list; a person without a ``pose_keypoints_2d`` list of 3J numbers
-            for a supported J; people of different skeletons; non-numeric, NaN or negative confidences; non-finite
-            coordinates of a joint with positive confidence.
+            for a supported J; 25 points and no skeleton given; people of different skeletons; non-numeric, NaN or
+            negative confidences; non-finite coordinates of a joint with positive confidence.
     """
-    path = Path(path)
-    data = load_json(path)
-    if not isinstance(data, dict) or not isinstance(data.get("people"), list):
-        got = "no 'people' key" if isinstance(data, dict) else type(data).__name__
-        raise FormatError(path, "people", "a JSON object with a 'people' list", got)
-    skel = None if skeleton is None else get_skeleton(skeleton)
-    people = []
-    for p, person in enumerate(data["people"]):
-        field = f"people[{p}].pose_keypoints_2d"
-        flat = person.get("pose_keypoints_2d") if isinstance(person, dict) else None
-        if not isinstance(flat, list):
-            raise FormatError(path, field, "a list of x, y, confidence numbers", "nothing")
-        skel = skeleton_of_length(len(flat), skel, OPENPOSE_SKELETONS, path, field)
-        people.append(checked_keypoints(flat, skel, path, field, score_name="confidence"))
-    if not people:
-        return np.zeros((0, 0 if skel is None else skel.num_joints, 3)), skel
-    return np.stack(people), skel
+    people, skel, placeholders = _read_people(Path(path), None if skeleton is None else get_skeleton(skeleton))
+    if placeholders:
+        logger.info("%s: skipped %d placeholder person entries without keypoints", path, placeholders)
+    return people, skel
 
 
 def read_openpose(
@@ -132,45 +172,66 @@ def read_openpose(
     Args:
         folders_by_view: folders in view order (views 0..V-1), or a mapping view -> folder.
         sequence: the sequence name written in every row.
-        skeleton: ``"body25"`` or ``"coco18"``; ``None`` infers it from the array length (and requires all files
-            to agree).
+        skeleton: ``"body25"``, ``"body25b"`` or ``"coco18"``; ``None`` infers it from the array length (18 points
+            only; all files must agree).
         frame_from: how frame numbers are found (:func:`list_openpose_frames`).
 
     Returns:
         The canonical detections table (no image size: OpenPose files do not carry it; see
-        :func:`humancal.formats.detections.read_detections`).
+        :func:`humancal.formats.detections.read_detections`), with ``attrs["skipped_placeholders"]`` =
+        ``{view: placeholder entries skipped}``.
 
     Raises:
-        FormatError: a bad file (:func:`read_openpose_file`); view folders with different frame counts or frame
-            numbers (the message names both folders).
+        FormatError: a bad file (:func:`read_openpose_file`); view folders with different numbers of files whose
+            names carry no frame numbers (the message names both folders).
     """
     folders = _by_view(folders_by_view)
-    listings = {v: list_openpose_frames(f, frame_from) for v, f in folders.items()}
-    first_view = min(listings)
-    ref = listings[first_view]
-    for v, frames in listings.items():
-        if len(frames) != len(ref):
-            raise FormatError(
-                folders[v],
-                None,
-                f"as many frames as view {first_view} ({folders[first_view]}: {len(ref)} files)",
-                f"{len(frames)} files",
-            )
-        missing = sorted({n for n, _ in ref} - {n for n, _ in frames})
-        if missing:
-            expected = f"the frame numbers of view {first_view} ({folders[first_view]})"
-            raise FormatError(folders[v], None, expected, f"no frame {missing[0]}")
+    listings, numbered = {}, {}
+    for v, folder in folders.items():
+        listings[v], numbered[v] = _list_frames(folder, frame_from)
+    _check_frames_line_up(folders, listings, numbered)
     skel = None if skeleton is None else get_skeleton(skeleton)
-    images = []
+    images, placeholders = [], {}
     for v, frames in listings.items():
+        placeholders[v] = 0
         for frame, path in frames:
-            people, file_skel = read_openpose_file(path, skel)
+            people, file_skel, skipped = _read_people(path, skel)
+            placeholders[v] += skipped
             if file_skel is None:
                 continue
             skel = file_skel
             kp, sc = to_canonical(people[..., :2], people[..., 2], skel)
             images.append((frame, v, kp, sc))
-    return detections_from_arrays(images, sequence, source=f"OpenPose folders {[str(f) for f in folders.values()]}")
+    for v, count in placeholders.items():
+        if count:
+            logger.info("%s: skipped %d placeholder person entries without keypoints", folders[v], count)
+    table = detections_from_arrays(images, sequence, source=f"OpenPose folders {[str(f) for f in folders.values()]}")
+    table.attrs[PLACEHOLDERS_ATTR] = placeholders
+    return table
+
+
+def _check_frames_line_up(folders: dict[int, Path], listings: dict, numbered: dict[int, bool]) -> None:
+    """Views with different frames are fine when frames are numbered in the names; otherwise they must agree."""
+    first_view = min(listings)
+    ref = listings[first_view]
+    all_frames = set().union(*({n for n, _ in frames} for frames in listings.values()))
+    for v, frames in listings.items():
+        if len(frames) == len(ref) and {n for n, _ in frames} == {n for n, _ in ref}:
+            continue
+        if not (numbered[v] and numbered[first_view]):
+            raise FormatError(
+                folders[v],
+                None,
+                f"as many files as view {first_view} ({folders[first_view]}: {len(ref)} files), since the file "
+                "names carry no frame numbers to match them by",
+                f"{len(frames)} files",
+            )
+    counts = {v: len(frames) for v, frames in listings.items()}
+    if len(set(counts.values())) > 1 or any(len(f) != len(all_frames) for f in listings.values()):
+        logger.warning(
+            "views have different frames (files per view %s, %d frames in all): an image without a file has no "
+            "detections", counts, len(all_frames),
+        )
 
 
 def write_openpose(

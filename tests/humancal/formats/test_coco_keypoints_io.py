@@ -160,3 +160,17 @@ def test_mixed_joint_counts_in_one_file(tmp_path):
     )
     with pytest.raises(FormatError, match=r"\[1\].keypoints'.*51 numbers.*got 78"):
         read_detections([path], "coco", sequence="s", image_size=(10, 10))
+
+
+def test_placeholder_entries_without_keypoints_are_skipped_and_counted(tmp_path):
+    path = _write(
+        tmp_path / "view0.json",
+        [
+            {"image_id": 0, "category_id": 1, "keypoints": [], "score": 0.0},
+            {"image_id": 0, "category_id": 1, "keypoints": _keypoints(17, {0: (10.0, 11.0, 0.9)}), "score": 0.8},
+            {"image_id": 1, "category_id": 1, "keypoints": [], "score": 0.0},
+        ],
+    )
+    table = read_detections([path, path], "coco", sequence="s", image_size=(640, 480))
+    assert table[["frame", "view", "det_id", "joint"]].values.tolist() == [[0, 0, 0, "nose"], [0, 1, 0, "nose"]]
+    assert table.attrs["skipped_placeholders"] == {0: 2, 1: 2}

@@ -9,6 +9,7 @@ from humancal.keypoints import CANONICAL_JOINTS, FLIP_INDEX
 
 EXPECTED_COUNTS = {
     "body25": 25,
+    "body25b": 25,
     "coco18": 18,
     "coco17": 17,
     "halpe26": 26,
@@ -23,6 +24,14 @@ EXPECTED_COUNTS = {
 
 def test_registry_holds_every_format_with_its_joint_count():
     assert {name: s.num_joints for name, s in SKELETONS.items()} == EXPECTED_COUNTS
+
+
+def test_body25b_is_coco_order_then_neck_head_and_feet():
+    body25b = SKELETONS["body25b"]
+    assert body25b.joints[:17] == CANONICAL_JOINTS[:17]
+    assert body25b.joints[17:19] == ("upper_neck", "top_head")
+    assert body25b.joints[19:] == SKELETONS["body25"].joints[19:]  # the foot points share BODY_25's order
+    assert body25b.index("left_eye") == 1 and SKELETONS["body25"].index("neck") == 1  # same length, other order
 
 
 def test_shelf15_order_is_the_ground_truth_order():

@@ -46,7 +46,8 @@ def _two_view_fixture(root: Path) -> list[Path]:
 
 
 def test_read_body25_folders_gives_one_row_per_present_canonical_joint(tmp_path):
-    table = read_detections(_two_view_fixture(tmp_path), "openpose", sequence="s", image_size=(640, 480))
+    table = read_detections(_two_view_fixture(tmp_path), "openpose", sequence="s", image_size=(640, 480),
+                            skeleton="body25")
     assert list(table.columns) == ["sequence", "frame", "view", "det_id", "joint", "x_px", "y_px", "score"]
     columns = ["frame", "view", "det_id", "joint", "x_px", "y_px", "score"]
     got = [tuple(r) for r in table[columns].itertuples(index=False)]
@@ -90,7 +91,7 @@ def test_round_trip_body25(tmp_path, detections):
     assert sorted(folders) == [0, 1]
     names = sorted(p.name for p in folders[1].iterdir())
     assert names == [f"demo_{f:012d}_keypoints.json" for f in (3, 4, 5, 6)]  # every frame between first and last
-    back = read_detections(folders, "openpose", sequence="demo", image_size=(1920, 1080))
+    back = read_detections(folders, "openpose", sequence="demo", image_size=(1920, 1080), skeleton="body25")
     pd.testing.assert_frame_equal(back, detections, check_exact=True)
     assert not list((tmp_path / "out").rglob("*.tmp"))
 
@@ -139,7 +140,7 @@ def _one_file(tmp_path: Path, text: str) -> Path:
 
 
 def _read(folder: Path):
-    return read_detections([folder], "openpose", sequence="s", image_size=(640, 480))
+    return read_detections([folder], "openpose", sequence="s", image_size=(640, 480), skeleton="body25")
 
 
 def _message(excinfo) -> str:
@@ -154,7 +155,7 @@ def _message(excinfo) -> str:
         ('{"people": [{"pose_keypoints_2d": [1, 2', None, "valid JSON"),
         ('{"version": 1.3}', "people", "'people' list"),
         ('{"people": [{"face_keypoints_2d": []}]}', "people[0].pose_keypoints_2d", "list of x, y, confidence"),
-        (json.dumps({"people": [{"pose_keypoints_2d": [0.0] * 60}]}), "people[0].pose_keypoints_2d", "75 (body25)"),
+        (json.dumps({"people": [{"pose_keypoints_2d": [0.0] * 60}]}), "people[0].pose_keypoints_2d", "75 numbers"),
         (json.dumps({"people": [{"pose_keypoints_2d": [0.0] * 74 + ["a"]}]}), "people[0].pose_keypoints_2d",
          "numbers only"),  # fmt: skip
     ],
@@ -199,29 +200,80 @@ def test_given_skeleton_must_match(tmp_path):
         read_detections([tmp_path / "v"], "openpose", sequence="s", image_size=(640, 480), skeleton="coco18")
 
 
-def test_view_folders_with_different_frame_counts(tmp_path):
+def test_view_folders_with_different_frame_counts_are_matched_by_frame_number(tmp_path, caplog):
     for f in range(3):
-        _write_frame(tmp_path / "a", f, [])
-    for f in range(2):
-        _write_frame(tmp_path / "b", f, [])
+        _write_frame(tmp_path / "a", f, [_person(25, {0: (1.0, 2.0, 0.9)})])
+    for f in (1, 2):
+        _write_frame(tmp_path / "b", f, [_person(25, {0: (3.0, 4.0, 0.8)})])
+    with caplog.at_level("WARNING"):
+        table = _read_two(tmp_path)
+    assert sorted(map(tuple, table[["frame", "view"]].to_numpy().tolist())) == [(0, 0), (1, 0), (1, 1), (2, 0), (2, 1)]
+    assert "different frames" in caplog.text and "{0: 3, 1: 2}" in caplog.text
+
+
+def test_view_folders_with_different_counts_and_no_frame_numbers(tmp_path):
+    for name in ("a", "b", "c"):
+        (tmp_path / "a").mkdir(exist_ok=True)
+        (tmp_path / "a" / f"{name}.json").write_text(json.dumps({"people": []}))
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "a.json").write_text(json.dumps({"people": []}))
     with pytest.raises(FormatError) as excinfo:
         _read_two(tmp_path)
     message = _message(excinfo)
     assert str(tmp_path / "a") in message and str(tmp_path / "b") in message
-    assert "3 files" in message and "2 files" in message
+    assert "3 files" in message and "1 files" in message and "no frame numbers" in message
 
 
-def test_view_folders_with_different_frame_numbers(tmp_path):
-    for f in (0, 1):
-        _write_frame(tmp_path / "a", f, [])
-    for f in (0, 2):
-        _write_frame(tmp_path / "b", f, [])
-    with pytest.raises(FormatError, match="no frame 1"):
-        _read_two(tmp_path)
+@pytest.mark.parametrize(
+    "names, frames",
+    [
+        (["cam01.0000.json", "cam01.0001.json", "cam01.0002.json"], [0, 1, 2]),
+        (["cam07_000000000010_keypoints.json", "cam07_000000000011_keypoints.json"], [10, 11]),
+        (["cam07_000000000003_keypoints.json"], [3]),  # one file: the last number, not the camera's
+        (["take2_cam3_f12.json", "take2_cam3_f4.json"], [4, 12]),
+    ],
+)
+def test_frame_number_is_the_number_that_varies_not_the_camera_number(tmp_path, names, frames):
+    folder = tmp_path / "v"
+    folder.mkdir()
+    for name in names:
+        (folder / name).write_text(json.dumps({"people": []}))
+    assert [f for f, _ in list_openpose_frames(folder)] == frames
+
+
+def test_placeholder_people_without_keypoints_are_skipped_and_counted(tmp_path, caplog):
+    placeholder = {"person_id": [-1], "pose_keypoints_2d": []}
+    _write_frame(tmp_path / "v", 0, [placeholder, _person(25, {0: (1.0, 2.0, 0.9)}), placeholder])
+    _write_frame(tmp_path / "v", 1, [placeholder])
+    with caplog.at_level("INFO"):
+        table = _read(tmp_path / "v")
+    assert table[["frame", "det_id", "joint"]].values.tolist() == [[0, 0, "nose"]]
+    assert table.attrs["skipped_placeholders"] == {0: 3}
+    assert "skipped 3 placeholder" in caplog.text
+
+
+def test_25_points_need_a_named_skeleton(tmp_path):
+    _write_frame(tmp_path / "v", 0, [_person(25, {0: (1.0, 2.0, 0.9)})])
+    with pytest.raises(FormatError) as excinfo:
+        read_detections([tmp_path / "v"], "openpose", sequence="s", image_size=(640, 480))
+    message = _message(excinfo)
+    assert "clip_000000000000_keypoints.json" in message and "people[0].pose_keypoints_2d" in message
+    assert "'body25' and 'body25b'" in message and "--skeleton" in message
+
+
+def test_body25b_is_read_in_its_own_order(tmp_path):
+    body25b = SKELETONS["body25b"]
+    person = _person(25, {body25b.index("left_eye"): (5.0, 6.0, 0.9), body25b.index("top_head"): (5.0, 1.0, 0.9)})
+    _write_frame(tmp_path / "v", 0, [person])
+    as_b = read_detections([tmp_path / "v"], "openpose", sequence="s", image_size=(640, 480), skeleton="body25b")
+    as_25 = _read(tmp_path / "v")
+    assert as_b["joint"].tolist() == ["left_eye"]  # the head top is not canonical
+    assert as_25["joint"].tolist() == ["left_ear"]  # BODY_25's index 18: the wrong joint, hence no guessing
 
 
 def _read_two(root: Path):
-    return read_detections([root / "a", root / "b"], "openpose", sequence="s", image_size=(640, 480))
+    return read_detections([root / "a", root / "b"], "openpose", sequence="s", image_size=(640, 480),
+                           skeleton="body25")
 
 
 def test_missing_and_empty_folders(tmp_path):
