@@ -1,4 +1,4 @@
-"""Pinhole cameras in the house convention, and their table form.
+"""Pinhole cameras in the house convention, stacked rigs, and their table form.
 
 Convention (``docs/conventions.md``): OpenCV pinhole, x right, y down, z forward;
 ``x_cam = R_cam_from_world @ x_world + t_cam_from_world_m``; ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``
@@ -7,14 +7,26 @@ in pixels; distortion as OpenCV's (k1, k2, p1, p2, k3). World: metres, right-han
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+import torch
 
+from humancal.geometry.projection import project_points_np, project_points_torch
 from humancal.tables import validate_table
 
-__all__ = ["Camera", "cameras_to_table", "cameras_from_table", "project_points"]
+__all__ = [
+    "Camera",
+    "CameraRig",
+    "RigTensors",
+    "cameras_to_table",
+    "cameras_from_table",
+    "intrinsic_matrices",
+    "project_points",
+    "sorted_views",
+]
 
 
 @dataclass(frozen=True)
@@ -75,45 +87,205 @@ class Camera:
 
 
 def project_points(camera: Camera, points_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Project world points to pixels (no distortion; see ``humancal.geometry`` for the distorted model).
+    """Project world points to pixels through one camera, with its lens distortion.
 
     Args:
         camera: the camera.
-        points_world_m: (..., 3) points in the world frame, metres.
+        points_world_m: (..., N, 3) or (3,) points in the world frame, metres.
 
     Returns:
         pixels_px: (..., 2) image coordinates, pixels (NaN where the point is not in front of the camera).
         depth_m: (...,) depth along the optical axis, metres.
     """
     X = np.asarray(points_world_m, dtype=np.float64)
-    x_cam = X @ camera.R_cam_from_world.T + camera.t_cam_from_world_m
-    depth = x_cam[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        uv = x_cam[..., :2] / depth[..., None]
-    px = uv @ camera.K[:2, :2].T + camera.K[:2, 2]
-    px[depth <= 0] = np.nan
-    return px, depth
+    flat = X.reshape(-1, 3) if X.ndim < 2 else X
+    px, depth = project_points_np(flat, camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m,
+                                  camera.distortion)
+    return px.reshape(X.shape[:-1] + (2,)), depth.reshape(X.shape[:-1])
+
+
+def intrinsic_matrices(fx_px, fy_px, cx_px, cy_px) -> np.ndarray:
+    """(V, 3, 3) pinhole matrices ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` from (V,) focal lengths and centres."""
+    fx = np.asarray(fx_px, dtype=np.float64).reshape(-1)
+    K = np.zeros((len(fx), 3, 3))
+    K[:, 0, 0], K[:, 1, 1] = fx, np.asarray(fy_px, dtype=np.float64).reshape(-1)
+    K[:, 0, 2], K[:, 1, 2], K[:, 2, 2] = np.asarray(cx_px).reshape(-1), np.asarray(cy_px).reshape(-1), 1.0
+    return K
+
+
+def sorted_views(table: pd.DataFrame, name: str) -> pd.DataFrame:
+    """The rows of a one-row-per-view table ordered by ``view``, which must hold 0..V-1 once each.
+
+    Raises:
+        ValueError: the views are not exactly 0..V-1.
+    """
+    rows = table.sort_values("view")
+    views = rows["view"].to_numpy()
+    if not np.array_equal(views, np.arange(len(views))):
+        raise ValueError(f"{name}: column 'view' must hold 0..{len(views) - 1} once each, got {views.tolist()}")
+    return rows
+
+
+@dataclass(frozen=True)
+class RigTensors:
+    """A rig's parameters as tensors, for differentiable projection (:meth:`CameraRig.to_torch`).
+
+    Attributes:
+        K: (V, 3, 3) intrinsics, pixels.
+        R_cam_from_world: (V, 3, 3).
+        t_cam_from_world_m: (V, 3), metres.
+        distortion: (V, 5) ``(k1, k2, p1, p2, k3)``.
+    """
+
+    K: torch.Tensor
+    R_cam_from_world: torch.Tensor
+    t_cam_from_world_m: torch.Tensor
+    distortion: torch.Tensor
+
+    def project(self, points_world_m: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """:func:`~humancal.geometry.projection.project_points_torch` through every view.
+
+        Args:
+            points_world_m: (N, 3) points seen by all views, or (..., V, N, 3) per view, metres.
+
+        Returns:
+            pixels_px (..., V, N, 2), depth_m (..., V, N), in_front (..., V, N).
+        """
+        return project_points_torch(points_world_m, self.K, self.R_cam_from_world, self.t_cam_from_world_m,
+                                    self.distortion)
+
+
+@dataclass(frozen=True)
+class CameraRig:
+    """V static cameras as stacked arrays (views in order: row v is view v).
+
+    Attributes:
+        K: (V, 3, 3) intrinsics, pixels.
+        R_cam_from_world: (V, 3, 3) rotations, world to camera.
+        t_cam_from_world_m: (V, 3) translations, metres.
+        distortion: (V, 5) OpenCV ``(k1, k2, p1, p2, k3)``.
+        image_size_px: (V, 2) int ``(width, height)``, pixels.
+    """
+
+    K: np.ndarray
+    R_cam_from_world: np.ndarray
+    t_cam_from_world_m: np.ndarray
+    distortion: np.ndarray
+    image_size_px: np.ndarray
+
+    def __post_init__(self) -> None:
+        arrays = {
+            "K": np.asarray(self.K, dtype=np.float64),
+            "R_cam_from_world": np.asarray(self.R_cam_from_world, dtype=np.float64),
+            "t_cam_from_world_m": np.asarray(self.t_cam_from_world_m, dtype=np.float64),
+            "distortion": np.asarray(self.distortion, dtype=np.float64),
+            "image_size_px": np.asarray(self.image_size_px, dtype=np.int64),
+        }
+        V = arrays["K"].shape[0] if arrays["K"].ndim == 3 else -1
+        tails = {"K": (3, 3), "R_cam_from_world": (3, 3), "t_cam_from_world_m": (3,), "distortion": (5,),
+                 "image_size_px": (2,)}
+        for name, tail in tails.items():
+            if V < 0 or arrays[name].shape != (V,) + tail:
+                raise ValueError(f"CameraRig.{name} must have shape (V,{' ' if tail else ''}"
+                                 f"{', '.join(map(str, tail))}) with V from K, got {arrays[name].shape}")
+        if (arrays["image_size_px"] <= 0).any():
+            raise ValueError("CameraRig.image_size_px must be positive (width, height) pixels")
+        for name, value in arrays.items():
+            object.__setattr__(self, name, value)
+
+    def __len__(self) -> int:
+        return int(self.K.shape[0])
+
+    @property
+    def centers_world_m(self) -> np.ndarray:
+        """(V, 3) camera centres in the world frame, metres: ``-R^T t``."""
+        return -np.einsum("vji,vj->vi", self.R_cam_from_world, self.t_cam_from_world_m)
+
+    @classmethod
+    def from_cameras(cls, cameras: Sequence[Camera]) -> CameraRig:
+        """Stack a list of cameras (list index = view)."""
+        if len(cameras) == 0:
+            return cls(np.zeros((0, 3, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros((0, 5)),
+                       np.zeros((0, 2), np.int64))
+        return cls(
+            np.stack([c.K for c in cameras]),
+            np.stack([c.R_cam_from_world for c in cameras]),
+            np.stack([c.t_cam_from_world_m for c in cameras]),
+            np.stack([c.distortion for c in cameras]),
+            np.array([(c.width_px, c.height_px) for c in cameras], dtype=np.int64),
+        )
+
+    def to_cameras(self) -> list[Camera]:
+        """One :class:`Camera` per view, in view order."""
+        return [
+            Camera(self.K[v], self.R_cam_from_world[v], self.t_cam_from_world_m[v], int(self.image_size_px[v, 0]),
+                   int(self.image_size_px[v, 1]), self.distortion[v])
+            for v in range(len(self))
+        ]
+
+    @classmethod
+    def from_table(cls, table: pd.DataFrame) -> CameraRig:
+        """The rig of a canonical ``cameras`` table (views must be 0..V-1).
+
+        Raises:
+            ValueError: views are not exactly 0..V-1.
+        """
+        rows = sorted_views(table, "cameras")
+        V = len(rows)
+        stack = lambda column, shape: (  # noqa: E731
+            np.stack([np.asarray(x, dtype=np.float64) for x in rows[column]]).reshape((V,) + shape)
+            if V else np.zeros((0,) + shape)
+        )
+        return cls(
+            intrinsic_matrices(rows["fx_px"], rows["fy_px"], rows["cx_px"], rows["cy_px"]),
+            stack("R_cam_from_world", (3, 3)),
+            stack("t_cam_from_world_m", (3,)),
+            stack("distortion", (5,)),
+            rows[["width_px", "height_px"]].to_numpy(np.int64).reshape(V, 2),
+        )
+
+    def to_table(self, sequence: str) -> pd.DataFrame:
+        """The canonical ``cameras`` table, one row per view."""
+        table = pd.DataFrame(
+            {
+                "sequence": sequence,
+                "view": np.arange(len(self)),
+                "fx_px": self.K[:, 0, 0],
+                "fy_px": self.K[:, 1, 1],
+                "cx_px": self.K[:, 0, 2],
+                "cy_px": self.K[:, 1, 2],
+                "R_cam_from_world": list(self.R_cam_from_world.reshape(-1, 9)),
+                "t_cam_from_world_m": list(self.t_cam_from_world_m),
+                "distortion": list(self.distortion),
+                "width_px": self.image_size_px[:, 0],
+                "height_px": self.image_size_px[:, 1],
+            },
+            columns=_CAMERA_COLUMNS,
+        )
+        return validate_table(table, "cameras")
+
+    def to_torch(self, dtype: torch.dtype = torch.float64, device: torch.device | str = "cpu") -> RigTensors:
+        """The parameters as tensors (no gradients; call ``requires_grad_`` on the ones to optimise)."""
+        as_t = lambda a: torch.as_tensor(a, dtype=dtype, device=device)  # noqa: E731
+        return RigTensors(as_t(self.K), as_t(self.R_cam_from_world), as_t(self.t_cam_from_world_m),
+                          as_t(self.distortion))
+
+    def project(self, points_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`~humancal.geometry.projection.project_points_np` through every view.
+
+        Args:
+            points_world_m: (N, 3) points seen by all views, or (..., V, N, 3) per view, metres.
+
+        Returns:
+            pixels_px (..., V, N, 2) (NaN where not in front), depth_m (..., V, N).
+        """
+        return project_points_np(points_world_m, self.K, self.R_cam_from_world, self.t_cam_from_world_m,
+                                 self.distortion)
 
 
 def cameras_to_table(cameras: list[Camera], sequence: str) -> pd.DataFrame:
     """The canonical ``cameras`` table (one row per view, views numbered in list order)."""
-    rows = [
-        {
-            "sequence": sequence,
-            "view": v,
-            "fx_px": c.K[0, 0],
-            "fy_px": c.K[1, 1],
-            "cx_px": c.K[0, 2],
-            "cy_px": c.K[1, 2],
-            "R_cam_from_world": c.R_cam_from_world.reshape(-1),
-            "t_cam_from_world_m": c.t_cam_from_world_m,
-            "distortion": c.distortion,
-            "width_px": c.width_px,
-            "height_px": c.height_px,
-        }
-        for v, c in enumerate(cameras)
-    ]
-    return validate_table(pd.DataFrame(rows, columns=_CAMERA_COLUMNS), "cameras")
+    return CameraRig.from_cameras(cameras).to_table(sequence)
 
 
 def cameras_from_table(table: pd.DataFrame) -> list[Camera]:
@@ -122,24 +294,7 @@ def cameras_from_table(table: pd.DataFrame) -> list[Camera]:
     Raises:
         ValueError: views are not exactly 0..V-1.
     """
-    table = table.sort_values("view")
-    views = table["view"].to_numpy()
-    if not np.array_equal(views, np.arange(len(views))):
-        raise ValueError(f"cameras table: views must be 0..{len(views) - 1} once each, got {views.tolist()}")
-    out = []
-    for row in table.itertuples(index=False):
-        K = np.array([[row.fx_px, 0.0, row.cx_px], [0.0, row.fy_px, row.cy_px], [0.0, 0.0, 1.0]])
-        out.append(
-            Camera(
-                K,
-                np.asarray(row.R_cam_from_world, dtype=np.float64).reshape(3, 3),
-                np.asarray(row.t_cam_from_world_m, dtype=np.float64),
-                int(row.width_px),
-                int(row.height_px),
-                np.asarray(row.distortion, dtype=np.float64),
-            )
-        )
-    return out
+    return CameraRig.from_table(table).to_cameras()
 
 
 _CAMERA_COLUMNS = [

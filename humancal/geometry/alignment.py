@@ -1,0 +1,123 @@
+"""Least-squares similarity and rigid alignment of corresponding point sets (Umeyama), over roma.
+
+``fit_similarity`` returns the transform ``x -> scale * R @ x + t`` as a :class:`Similarity`; ``align_points``
+applies the best one to the source directly, batched over many point sets with per-point weights (a weight of 0
+leaves a point, even a NaN one, out of the fit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import roma
+import torch
+
+__all__ = ["Similarity", "fit_similarity", "align_points"]
+
+
+@dataclass(frozen=True)
+class Similarity:
+    """``x -> scale * R @ x + t``.
+
+    Attributes:
+        scale: positive scale.
+        R: (3, 3) rotation.
+        t: (3,) translation (in the target's unit).
+    """
+
+    scale: float
+    R: np.ndarray
+    t: np.ndarray
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """(..., 3) transformed points."""
+        return self.scale * np.asarray(points, dtype=np.float64) @ self.R.T + self.t
+
+    def inverse(self) -> Similarity:
+        """The transform taking the target back onto the source."""
+        R_inv = self.R.T
+        return Similarity(1.0 / self.scale, R_inv, -(R_inv @ self.t) / self.scale)
+
+    def apply_to_pose(self, R_cam_from_world: np.ndarray, t_cam_from_world_m: np.ndarray):
+        """Extrinsics of a camera in the target world: the same image, the centre moved and the unit scaled.
+
+        Args:
+            R_cam_from_world: (3, 3) rotation in the source world.
+            t_cam_from_world_m: (3,) translation in the source world.
+
+        Returns:
+            ``(R_cam_from_world, t_cam_from_world_m)`` in the target world.
+        """
+        R_new = np.asarray(R_cam_from_world, dtype=np.float64) @ self.R.T
+        centre = -np.asarray(R_cam_from_world, dtype=np.float64).T @ np.asarray(t_cam_from_world_m, dtype=np.float64)
+        return R_new, -R_new @ self.apply(centre)
+
+
+def _registration(src: torch.Tensor, dst: torch.Tensor, weights: torch.Tensor | None, with_scale: bool):
+    if with_scale:
+        return roma.rigid_points_registration(src, dst, weights=weights, compute_scaling=True)
+    R, t = roma.rigid_points_registration(src, dst, weights=weights)
+    return R, t, torch.ones(R.shape[:-2], dtype=R.dtype)
+
+
+def fit_similarity(source: np.ndarray, target: np.ndarray, with_scale: bool = True) -> Similarity:
+    """The least-squares similarity mapping ``source`` onto ``target`` (Umeyama 1991).
+
+    Args:
+        source, target: (N, 3) corresponding points, finite; N >= 3 and not collinear for a unique answer.
+        with_scale: estimate the scale (else 1: a rigid motion).
+
+    Returns:
+        The :class:`Similarity`.
+
+    Raises:
+        ValueError: shapes differ, fewer than 2 points, non-finite values, or all source points equal.
+    """
+    src = np.asarray(source, dtype=np.float64)
+    dst = np.asarray(target, dtype=np.float64)
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 2:
+        raise ValueError(f"fit_similarity needs two (N>=2, 3) arrays of the same shape, got {src.shape} and "
+                         f"{dst.shape}")
+    if not (np.isfinite(src).all() and np.isfinite(dst).all()):
+        raise ValueError("fit_similarity: points must be finite")
+    if not np.ptp(src, axis=0).any():
+        raise ValueError("fit_similarity: the source points are all equal (no rotation or scale is defined)")
+    R, t, s = _registration(torch.from_numpy(src), torch.from_numpy(dst), None, with_scale)
+    return Similarity(float(s), R.numpy(), t.numpy())
+
+
+def align_points(
+    source: np.ndarray, target: np.ndarray, weights: np.ndarray | None = None, with_scale: bool = True
+) -> np.ndarray:
+    """Each source point set moved by its best similarity (or rigid motion) onto the target, batched.
+
+    Args:
+        source, target: (..., N, 3) corresponding points; entries with weight 0 may be NaN.
+        weights: (..., N) non-negative weights (default: 1 where both points are finite, else 0). A set needs
+            at least three points of positive weight, not collinear, for a unique fit.
+        with_scale: estimate a scale per set (else 1).
+
+    Returns:
+        (..., N, 3) aligned source points (every point of a set moved, weighted or not; NaN sets where fewer
+        than 3 points have positive weight).
+
+    Raises:
+        ValueError: shapes differ or are not (..., N, 3), or weights of the wrong shape or negative.
+    """
+    src = np.asarray(source, dtype=np.float64)
+    dst = np.asarray(target, dtype=np.float64)
+    if src.shape != dst.shape or src.ndim < 2 or src.shape[-1] != 3:
+        raise ValueError(f"align_points needs two (..., N, 3) arrays of the same shape, got {src.shape} and "
+                         f"{dst.shape}")
+    finite = np.isfinite(src).all(-1) & np.isfinite(dst).all(-1)
+    w = finite.astype(np.float64) if weights is None else np.asarray(weights, dtype=np.float64)
+    if w.shape != src.shape[:-1] or not (w >= 0).all():
+        raise ValueError(f"align_points: weights must be non-negative with shape {src.shape[:-1]}, got {w.shape}")
+    w = np.where(finite, w, 0.0)
+    enough = (w > 0).sum(-1) >= 3
+    w_safe = np.where(enough[..., None], w, 1.0)  # sets too small to fit get dummy weights, NaN results below
+    src0, dst0 = np.where(finite[..., None], src, 0.0), np.where(finite[..., None], dst, 0.0)
+    R, t, s = _registration(torch.from_numpy(src0), torch.from_numpy(dst0), torch.from_numpy(w_safe), with_scale)
+    aligned = s.numpy()[..., None, None] * src @ np.swapaxes(R.numpy(), -1, -2) + t.numpy()[..., None, :]
+    return np.where(enough[..., None, None], aligned, np.nan)

@@ -1,0 +1,181 @@
+"""Rotation conversions and distances, a thin layer over roma.
+
+Names read source to target with the representation spelled out. Every function takes numpy arrays or torch
+tensors with any leading batch shape and returns the same kind: numpy in, float64 numpy out (computed in float64
+torch); a tensor in, a tensor out (differentiable, its dtype and device kept).
+
+Representations (``docs/conventions.md``): rotation matrices ``(..., 3, 3)`` inside the library; rotation
+vectors (axis times angle, radians) ``(..., 3)`` at file boundaries; the 6D form is the first two columns of the
+matrix, ``(..., 3, 2)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TypeVar
+
+import numpy as np
+import roma
+import torch
+
+__all__ = [
+    "rotvec_to_rotmat",
+    "rotmat_to_rotvec",
+    "axis_angle_to_rotmat",
+    "rotmat_to_6d",
+    "sixd_to_rotmat",
+    "project_to_rotmat",
+    "rotation_angle_deg",
+    "rotation_distance_deg",
+    "rotmat_a_to_b",
+]
+
+Array = TypeVar("Array", np.ndarray, torch.Tensor)
+
+
+def _torch_op(fn: Callable[..., torch.Tensor], *args) -> np.ndarray | torch.Tensor:
+    """Run a tensor function on numpy (float64, returned as numpy) or tensor arguments (returned as tensors)."""
+    if any(isinstance(a, torch.Tensor) for a in args):
+        return fn(*(torch.as_tensor(a) if not isinstance(a, torch.Tensor) else a for a in args))
+    tensors = [torch.as_tensor(np.asarray(a, dtype=np.float64)) for a in args]
+    return fn(*tensors).numpy()
+
+
+def _check_last(x, shape: tuple[int, ...], name: str) -> None:
+    if tuple(x.shape[len(x.shape) - len(shape):]) != shape or len(x.shape) < len(shape):
+        raise ValueError(f"{name} must have shape (..., {', '.join(map(str, shape))}), got {tuple(x.shape)}")
+
+
+def rotvec_to_rotmat(rotvec: Array) -> Array:
+    """Rotation vectors (axis times angle, radians) to matrices (Rodrigues).
+
+    Args:
+        rotvec: (..., 3) rotation vectors, radians.
+
+    Returns:
+        (..., 3, 3) rotation matrices.
+
+    Raises:
+        ValueError: wrong shape.
+    """
+    _check_last(rotvec, (3,), "rotvec")
+    return _torch_op(roma.rotvec_to_rotmat, rotvec)
+
+
+def rotmat_to_rotvec(R: Array) -> Array:
+    """Rotation matrices to rotation vectors (axis times angle, angle in [0, pi], radians).
+
+    Args:
+        R: (..., 3, 3) rotation matrices.
+
+    Returns:
+        (..., 3) rotation vectors, radians.
+
+    Raises:
+        ValueError: wrong shape.
+    """
+    _check_last(R, (3, 3), "R")
+    return _torch_op(roma.rotmat_to_rotvec, R)
+
+
+def axis_angle_to_rotmat(axis: Array, angle_rad: Array) -> Array:
+    """Rotations about unit axes by angles (right-handed), broadcast against each other.
+
+    Args:
+        axis: (..., 3) unit axes.
+        angle_rad: (...) angles, radians.
+
+    Returns:
+        (..., 3, 3) rotation matrices.
+
+    Raises:
+        ValueError: wrong shape of ``axis``.
+    """
+    _check_last(axis, (3,), "axis")
+    return _torch_op(lambda a, t: roma.rotvec_to_rotmat(a * t[..., None]), axis, angle_rad)
+
+
+def rotmat_to_6d(R: Array) -> Array:
+    """The 6D form of rotations: their first two columns, (..., 3, 2)."""
+    _check_last(R, (3, 3), "R")
+    return R[..., :2]
+
+
+def sixd_to_rotmat(sixd: Array) -> Array:
+    """Rotation matrices from 6D forms (Gram-Schmidt on the two columns; any full-rank input is accepted).
+
+    Args:
+        sixd: (..., 3, 2) two 3D columns.
+
+    Returns:
+        (..., 3, 3) rotation matrices whose first column is the normalised first input column.
+    """
+    _check_last(sixd, (3, 2), "sixd")
+    return _torch_op(roma.special_gramschmidt, sixd)
+
+
+def project_to_rotmat(M: Array) -> Array:
+    """The rotation nearest to each matrix in the Frobenius norm (special orthogonal Procrustes).
+
+    Args:
+        M: (..., 3, 3) matrices (e.g. a weighted sum of outer products of corresponding vectors).
+
+    Returns:
+        (..., 3, 3) rotation matrices (det +1).
+    """
+    _check_last(M, (3, 3), "M")
+    return _torch_op(roma.special_procrustes, M)
+
+
+def rotation_angle_deg(R: Array) -> Array:
+    """Angle of rotations, degrees in [0, 180].
+
+    Args:
+        R: (..., 3, 3) rotation matrices.
+
+    Returns:
+        (...) angles, degrees.
+    """
+    _check_last(R, (3, 3), "R")
+    return _torch_op(lambda r: torch.rad2deg(roma.rotmat_geodesic_distance(r, torch.eye(3, dtype=r.dtype,
+                                                                                            device=r.device))), R)
+
+
+def rotation_distance_deg(R_a: Array, R_b: Array) -> Array:
+    """Geodesic angle between rotations (the angle of ``R_a @ R_b.T``), degrees in [0, 180].
+
+    Args:
+        R_a, R_b: (..., 3, 3) rotation matrices (broadcast).
+
+    Returns:
+        (...) angles, degrees.
+    """
+    _check_last(R_a, (3, 3), "R_a")
+    _check_last(R_b, (3, 3), "R_b")
+    return _torch_op(lambda a, b: torch.rad2deg(roma.rotmat_geodesic_distance(*torch.broadcast_tensors(a, b))),
+                     R_a, R_b)
+
+
+def _a_to_b(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    a = a / torch.linalg.norm(a, dim=-1, keepdim=True)
+    b = b / torch.linalg.norm(b, dim=-1, keepdim=True)
+    a, b = torch.broadcast_tensors(a, b)
+    # the unit quaternion (xyzw) of the rotation by the angle between a and b about a x b, before normalising:
+    # (a x b, 1 + a . b), half the angle by construction; singular only for opposite vectors
+    q = torch.cat([torch.linalg.cross(a, b), 1.0 + (a * b).sum(-1, keepdim=True)], dim=-1)
+    return roma.unitquat_to_rotmat(q / torch.linalg.norm(q, dim=-1, keepdim=True))
+
+
+def rotmat_a_to_b(a: Array, b: Array) -> Array:
+    """The smallest rotation taking direction ``a`` onto direction ``b`` (about the axis ``a x b``).
+
+    Args:
+        a, b: (..., 3) directions (normalised here; broadcast). Opposite directions have no unique answer
+            (NaN rows).
+
+    Returns:
+        (..., 3, 3) rotations ``R`` with ``R @ a / |a| = b / |b|``.
+    """
+    _check_last(a, (3,), "a")
+    _check_last(b, (3,), "b")
+    return _torch_op(_a_to_b, a, b)
