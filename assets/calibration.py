@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import threadpoolctl
 
+from assets.checks import check_result
 from assets.common import png_metadata, sequence_asset, table_output
 from humancal.calibration import (
     ExtrinsicsConfig,
@@ -23,7 +24,7 @@ from humancal.calibration.types import LiftedPoses as CalibrationLifted
 from humancal.camera import cameras_to_table
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
-from humancal.validation import check_cameras_valid, check_focal_plausible, check_rig_geometry
+from humancal.validation import CheckReport, check_cameras_valid, check_focal_plausible, check_rig_geometry
 
 MIN_UPRIGHT_PER_VIEW = 20
 """Below this many upright standing detections in a view, the intrinsics check warns."""
@@ -91,19 +92,35 @@ def intrinsics(context: dg.AssetExecutionContext, detections: pd.DataFrame, view
         ill_conditioned_views=int((table["status"] != "ok").sum()),
         per_view=dg.MetadataValue.md(table.drop(columns="sequence").to_markdown(index=False, floatfmt=".3g")),
     )
-    report = check_focal_plausible(table[table["status"] == "ok"])
+    yield check_result(context, "focal_plausible", _single_view_focal_report(table))
+    yield check_result(context, "enough_upright_people", _upright_report(table), severity=dg.AssetCheckSeverity.WARN)
+
+
+def _single_view_focal_report(table: pd.DataFrame) -> CheckReport:
+    """Focal plausibility of the well-conditioned single-view estimates; "not checked" when there are none."""
     flagged = table[table["status"] != "ok"]
-    note = f"; views {flagged['view'].tolist()} flagged {sorted(set(flagged['status']))}" if len(flagged) else ""
-    yield dg.AssetCheckResult(check_name="focal_plausible", passed=report.passed,
-                              description=report.description + note, metadata=report.figures)
+    if len(flagged) == len(table):
+        why = ("no view" if table.empty else
+               f"every view's single-view focal is flagged ({', '.join(sorted(set(flagged['status'])))}): "
+               "the extrinsics step recovers them, and its own focal_plausible check covers them")
+        return CheckReport.nothing_to_check(why, {"views": float(len(table)), "flagged_views": float(len(flagged))})
+    report = check_focal_plausible(table[table["status"] == "ok"])
+    if len(flagged):
+        note = f"; views {flagged['view'].tolist()} flagged {sorted(set(flagged['status']))} (not checked)"
+        report = CheckReport(report.passed, report.description + note, report.figures, report.checked)
+    return report
+
+
+def _upright_report(table: pd.DataFrame) -> CheckReport:
+    if table.empty:
+        return CheckReport.nothing_to_check("no view")
     few = table[table["num_candidates"] < MIN_UPRIGHT_PER_VIEW]
-    yield dg.AssetCheckResult(
-        check_name="enough_upright_people",
-        passed=few.empty,
-        severity=dg.AssetCheckSeverity.WARN,
-        description=("every view has enough upright standing detections" if few.empty else
-                     "; ".join(f"view {r.view}: {r.num_candidates} upright detections" for r in few.itertuples())),
-        metadata={"min_upright_detections": int(table["num_candidates"].min())},
+    return CheckReport(
+        few.empty,
+        "every view has enough upright standing detections" if few.empty else
+        "; ".join(f"view {r.view}: {r.num_candidates} upright detections" for r in few.itertuples()),
+        {"min_upright_detections": float(table["num_candidates"].min())},
+        checked=len(table),
     )
 
 
@@ -148,15 +165,20 @@ def extrinsics(
     )
     for name, report in (("cameras_valid", check_cameras_valid(table)), ("focal_plausible", check_focal_plausible(table)),
                          ("rig_geometry", check_rig_geometry(table, people))):
-        yield dg.AssetCheckResult(check_name=name, passed=report.passed, description=report.description,
-                                  metadata=report.figures)
+        yield check_result(context, name, report)
+    yield check_result(context, "focal_constrained", _focal_constrained_report(per_view),
+                       severity=dg.AssetCheckSeverity.WARN)
+
+
+def _focal_constrained_report(per_view: pd.DataFrame) -> CheckReport:
+    if per_view.empty:
+        return CheckReport.nothing_to_check("no view")
     loose = per_view[per_view["focal_status"] != "ok"]
-    yield dg.AssetCheckResult(
-        check_name="focal_constrained",
-        passed=loose.empty,
-        severity=dg.AssetCheckSeverity.WARN,
-        description=("every focal is determined to 5 %" if loose.empty else "; ".join(
+    return CheckReport(
+        loose.empty,
+        "every focal is determined to 5 %" if loose.empty else "; ".join(
             f"view {r.view}: focal {r.focal_px:.0f} px +- {100 * r.focal_rel_std:.0f} % (too few matched people?)"
-            for r in loose.itertuples())),
-        metadata={"max_focal_rel_std": float(per_view["focal_rel_std"].max())},
+            for r in loose.itertuples()),
+        {"max_focal_rel_std": float(per_view["focal_rel_std"].max())},
+        checked=len(per_view),
     )

@@ -1,7 +1,9 @@
 """Plausibility checks of canonical tables (used by the pipeline's asset checks and by readers).
 
 Each check returns a :class:`CheckReport` rather than raising: the caller decides whether a failed
-check blocks downstream work.
+check blocks downstream work. A check that had nothing to examine (no cameras, no known focal length) does not
+pass: its report says ``"not checked: <why>"`` with ``checked == 0`` (:attr:`CheckReport.not_checked`), so that
+the caller can show a warning instead of a green mark.
 """
 
 from __future__ import annotations
@@ -24,11 +26,34 @@ __all__ = [
 
 @dataclass(frozen=True)
 class CheckReport:
-    """Outcome of one check: pass/fail, a one-line description, and figures worth showing."""
+    """Outcome of one check: pass/fail, a one-line description, and figures worth showing.
+
+    Attributes:
+        passed: the check ran on something and found nothing wrong.
+        description: one line; ``"not checked: <why>"`` when there was nothing to check.
+        figures: numbers worth showing beside the outcome.
+        checked: how many items (rows, cameras, focal lengths) were examined; 0: nothing was checked, and
+            ``passed`` is False.
+    """
 
     passed: bool
     description: str
     figures: dict[str, float] = field(default_factory=dict)
+    checked: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.checked == 0 and self.passed:
+            raise ValueError(f"CheckReport: a check that examined nothing cannot pass ({self.description!r})")
+
+    @property
+    def not_checked(self) -> bool:
+        """True when there was nothing to check (the outcome says nothing about the data)."""
+        return self.checked == 0
+
+    @classmethod
+    def nothing_to_check(cls, why: str, figures: dict[str, float] | None = None) -> CheckReport:
+        """The report of a check that had nothing to examine: not passed, ``"not checked: <why>"``."""
+        return cls(False, f"not checked: {why}", dict(figures or {}), checked=0)
 
 
 def check_detections_plausible(detections: pd.DataFrame, views: pd.DataFrame, margin: float = 0.1) -> CheckReport:
@@ -40,6 +65,7 @@ def check_detections_plausible(detections: pd.DataFrame, views: pd.DataFrame, ma
         margin: allowed overshoot beyond the image border, as a fraction of width/height.
     """
     if detections.empty:
+        # an empty detections table is a broken input, not a clean one: fail (the pipeline blocks on it)
         return CheckReport(False, "no detections at all", {"rows": 0.0})
     size = views.set_index("view")[["width_px", "height_px"]]
     unknown = sorted(set(detections["view"].unique()) - set(size.index))
@@ -62,12 +88,14 @@ def check_detections_plausible(detections: pd.DataFrame, views: pd.DataFrame, ma
         f"{int(figures['non_finite'])} non-finite, {int(figures['outside_image'])} outside the image "
         f"(margin {margin:.0%}), {int(figures['score_out_of_range'])} scores outside [0, 1]"
     )
-    return CheckReport(passed, text, figures)
+    return CheckReport(passed, text, figures, checked=len(x))
 
 
 def check_cameras_valid(cameras: pd.DataFrame, tol: float = 1e-5) -> CheckReport:
     """Every camera has finite positive focal lengths, a principal point inside the image and a proper
-    rotation (orthonormal, determinant +1: a right-handed camera frame)."""
+    rotation (orthonormal, determinant +1: a right-handed camera frame). No camera at all: not checked."""
+    if cameras.empty:
+        return CheckReport.nothing_to_check("no cameras in the table", {"cameras": 0.0})
     worst_orth, worst_det, bad = 0.0, 0.0, []
     for v, cam in enumerate(cameras_from_table(cameras)):
         K, R = cam.K, cam.R_cam_from_world
@@ -84,8 +112,9 @@ def check_cameras_valid(cameras: pd.DataFrame, tol: float = 1e-5) -> CheckReport
             bad.append(f"view {v}: translation not finite")
     figures = {"cameras": float(len(cameras)), "max_orthonormality_error": worst_orth, "max_det_error": worst_det}
     if bad:
-        return CheckReport(False, "; ".join(bad), figures)
-    return CheckReport(True, f"{len(cameras)} cameras: finite K, proper right-handed rotations", figures)
+        return CheckReport(False, "; ".join(bad), figures, checked=len(cameras))
+    return CheckReport(True, f"{len(cameras)} cameras: finite K, proper right-handed rotations", figures,
+                       checked=len(cameras))
 
 
 PLAUSIBLE_HFOV_DEG = (10.0, 140.0)
@@ -95,7 +124,8 @@ PLAUSIBLE_HFOV_DEG = (10.0, 140.0)
 def check_focal_plausible(cameras: pd.DataFrame, hfov_deg: tuple[float, float] = PLAUSIBLE_HFOV_DEG) -> CheckReport:
     """Every focal length (``fx_px``, ``fy_px`` of a ``cameras`` or ``intrinsics`` table) gives a horizontal
     field of view inside ``hfov_deg`` for its image width, and fx, fy agree within 20 %. Views whose focal is
-    not known yet (NaN, e.g. deferred intrinsics) are skipped and counted."""
+    not known yet (NaN, e.g. deferred intrinsics) are skipped and counted; when no focal is known (or the table
+    is empty) the report is "not checked"."""
     bad, fovs, unknown = [], [], 0
     for r in cameras.itertuples(index=False):
         if not (np.isfinite(r.fx_px) and np.isfinite(r.fy_px)):
@@ -114,13 +144,14 @@ def check_focal_plausible(cameras: pd.DataFrame, hfov_deg: tuple[float, float] =
     figures = {"views": float(len(cameras)), "unknown_focal_views": float(unknown)}
     if fovs:
         figures.update(min_hfov_deg=min(fovs), max_hfov_deg=max(fovs))
-    if bad:
-        return CheckReport(False, "; ".join(bad), figures)
     known = len(cameras) - unknown
+    if bad:
+        return CheckReport(False, "; ".join(bad), figures, checked=known)
     if known == 0:
-        return CheckReport(True, "no focal length to check", figures)
+        why = "no view in the table" if len(cameras) == 0 else f"the focal length of all {unknown} views is not known"
+        return CheckReport.nothing_to_check(why, figures)
     note = f" ({unknown} not known yet)" if unknown else ""
-    return CheckReport(True, f"{known} focal lengths give plausible fields of view{note}", figures)
+    return CheckReport(True, f"{known} focal lengths give plausible fields of view{note}", figures, checked=known)
 
 
 def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in_view: float = 0.5) -> CheckReport:
@@ -131,8 +162,10 @@ def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in
       floor points, raised to 1 m, the middle of a body) are in front of every camera and project inside its
       image.
 
-    The right-handedness of the camera frames is :func:`check_cameras_valid`'s.
+    The right-handedness of the camera frames is :func:`check_cameras_valid`'s. No camera at all: not checked.
     """
+    if cameras.empty:
+        return CheckReport.nothing_to_check("no cameras in the table", {})
     points = np.asarray(people_floor_m, dtype=np.float64).reshape(-1, 3) + np.array([0.0, 0.0, 1.0])
     bad, heights, seen = [], [], []
     for v, cam in enumerate(cameras_from_table(cameras)):
@@ -156,5 +189,6 @@ def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in
     if not len(points):
         bad.append("no people positions to check the cameras' viewing directions against")
     if bad:
-        return CheckReport(False, "; ".join(bad), figures)
-    return CheckReport(True, f"{len(heights)} cameras above the floor, each seeing most of the people", figures)
+        return CheckReport(False, "; ".join(bad), figures, checked=len(heights))
+    return CheckReport(True, f"{len(heights)} cameras above the floor, each seeing most of the people", figures,
+                       checked=len(heights))

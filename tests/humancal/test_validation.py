@@ -2,9 +2,16 @@
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from humancal.camera import Camera, cameras_to_table
-from humancal.validation import check_cameras_valid, check_focal_plausible, check_rig_geometry
+from humancal.validation import (
+    CheckReport,
+    check_cameras_valid,
+    check_detections_plausible,
+    check_focal_plausible,
+    check_rig_geometry,
+)
 
 
 def _look_at(centre, target, f=1000.0, size=(1920, 1080)) -> Camera:
@@ -67,3 +74,37 @@ def test_focal_plausibility():
     assert report.figures["unknown_focal_views"] == 1.0
     ok = check_focal_plausible(pd.concat([table.iloc[[0]], table.iloc[[3]]]))
     assert ok.passed and "1 not known yet" in ok.description
+
+
+def test_nothing_to_check_is_not_a_pass():
+    empty = cameras_to_table(_ring(), "s").iloc[:0]
+    for report in (check_cameras_valid(empty), check_focal_plausible(empty), check_rig_geometry(empty, PEOPLE)):
+        assert not report.passed and report.not_checked
+        assert report.description.startswith("not checked: ")
+    unknown = cameras_to_table(_ring(), "s")
+    unknown[["fx_px", "fy_px"]] = np.nan
+    report = check_focal_plausible(unknown)
+    assert not report.passed and report.not_checked
+    assert report.description == "not checked: the focal length of all 4 views is not known"
+    assert report.figures["unknown_focal_views"] == 4.0
+
+
+def test_checks_that_examined_something_say_how_much():
+    table = cameras_to_table(_ring(), "s")
+    table.loc[3, ["fx_px", "fy_px"]] = np.nan
+    assert check_focal_plausible(table).checked == 3
+    assert check_cameras_valid(cameras_to_table(_ring(), "s")).checked == 4
+    assert check_rig_geometry(cameras_to_table(_ring(), "s"), PEOPLE).checked == 4
+
+
+def test_a_report_that_examined_nothing_cannot_pass():
+    with pytest.raises(ValueError, match="examined nothing cannot pass"):
+        CheckReport(True, "fine", checked=0)
+
+
+def test_no_detections_at_all_fails():
+    from humancal.tables import empty_table
+
+    views = pd.DataFrame({"view": [0], "width_px": [640], "height_px": [480]})
+    report = check_detections_plausible(empty_table("detections"), views)
+    assert not report.passed and report.description == "no detections at all"
