@@ -15,7 +15,7 @@ from humancal.camera import cameras_from_table
 from resources.datasets import DatasetsResource
 
 
-@sequence_asset("metrics", code_version="3")
+@sequence_asset("metrics", code_version="4")
 def metric_tables(
     context: dg.AssetExecutionContext,
     datasets: DatasetsResource,
@@ -49,7 +49,7 @@ def metric_tables(
         ],
         ignore_index=True,
     )
-    headline = table[~table["metric"].str.contains("/")]
+    headline = table[table["view"].isna() & ~table["metric"].str.contains("/")].drop(columns="view")
     context.log.info(f"{spec.key}: {len(table)} metric rows ({len(headline)} headline)")
     with tempfile.TemporaryDirectory() as tmp:
         png = plot_rig_comparison(estimated, gt, raw_detections, gt_associations, Path(tmp) / "rigs.png",

@@ -14,7 +14,7 @@ Protocol:
   detected keypoints. ``reprojection_error_gt_cameras_px`` is the same with the ground-truth cameras: the floor
   set by the detections themselves.
 
-Every metric is reported per view (suffix ``/view_<v>``) and as the mean over views (no suffix).
+Every metric is reported per view (the row's ``view`` column) and as the mean over views (``view`` null).
 """
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ def reprojection_errors_per_view(
 
 def _rows(name: str, values: np.ndarray, unit: str) -> list[MetricRow]:
     rows = [MetricRow(name, float(np.nanmean(values)) if np.isfinite(values).any() else float("nan"), unit)]
-    rows += [MetricRow(f"{name}/view_{v}", float(x), unit) for v, x in enumerate(values)]
+    rows += [MetricRow(name, float(x), unit, view=v) for v, x in enumerate(values)]
     return rows
 
 
@@ -120,7 +120,7 @@ def camera_metrics(
 
     Returns:
         Rows ``focal_error_pct``, ``position_error_mm``, ``angle_error_deg`` (and ``reprojection_error_px``,
-        ``reprojection_error_gt_cameras_px``), each as the mean over views and per view ``/view_<v>``.
+        ``reprojection_error_gt_cameras_px``), each as the mean over views (``view`` None) and per view.
     """
     err = camera_errors(estimated, ground_truth)
     rows = (_rows("focal_error_pct", err["focal_error_pct"], "%") + _rows("position_error_mm", err["position_error_mm"], "mm")

@@ -14,7 +14,7 @@ Protocol (``docs/shelf.md``):
 * Per view and frame, detections are matched one-to-one to the counted person-views by
   ``scipy.optimize.linear_sum_assignment`` on the mean distance, among close pairs only.
 
-Metrics (per view, suffix ``/view_<v>``, and overall):
+Metrics (per view, the row's ``view``, and overall, ``view`` null):
 
 * ``detection_recall`` = matched person-views / counted person-views.
 * ``detection_fragment_rate`` = unmatched detections close to some ground-truth person (counted or not) /
@@ -256,7 +256,7 @@ def detection_quality_metrics(
 ) -> pd.DataFrame:
     """The canonical ``metrics`` table from the per-item tables of :class:`GroupingEvaluation`.
 
-    Rows per sequence: each metric overall and per view (suffix ``/view_<v>``). Recall and fragment rate are NaN
+    Rows per sequence: each metric overall (``view`` null) and per view. Recall and fragment rate are NaN
     where their denominator is zero, the median error where nothing matched.
     """
     rows = []
@@ -266,7 +266,7 @@ def detection_quality_metrics(
         dt = detections[detections["sequence"] == seq]
         er = joint_errors_px[joint_errors_px["sequence"] == seq]
         views = sorted(set(pv["view"]) | set(dt["view"]))
-        for suffix, sel in [("", None)] + [(f"/view_{v}", v) for v in views]:
+        for sel in [None, *views]:
             p = pv if sel is None else pv[pv["view"] == sel]
             d = dt if sel is None else dt[dt["view"] == sel]
             e = er if sel is None else er[er["view"] == sel]
@@ -282,6 +282,7 @@ def detection_quality_metrics(
                 ("fragment_detections", fragments, "count"),
                 ("detections", len(d), "count"),
             ]
-            rows.extend((dataset, seq, method, name + suffix, float(value), unit) for name, value, unit in figures)
-    table = pd.DataFrame(rows, columns=["dataset", "sequence", "method", "metric", "value", "unit"])
+            rows.extend((dataset, seq, method, name, sel, float(value), unit) for name, value, unit in figures)
+    table = pd.DataFrame(rows, columns=["dataset", "sequence", "method", "metric", "view", "value", "unit"])
+    table["view"] = table["view"].astype("Int32")
     return validate_table(table, "metrics", source="detection_quality_metrics")

@@ -31,9 +31,9 @@ Protocol (method ``"lifter"``), one lifted detection at a time:
   detections whose person has a true height.
 * ``num_detections``: how many detections were evaluated (unit ``count``).
 
-Aggregates: the name without suffix pools every evaluated detection (not the mean over views, unlike
-:mod:`evaluation.camera_metrics`); ``<metric>/view_<v>`` pools the evaluated detections of view v (only views
-that have some); ``<metric>/upright`` pools those whose stored ``upright_score`` (the crop-frame score the
+Aggregates: the name without suffix and without a view pools every evaluated detection (not the mean over views,
+unlike :mod:`evaluation.camera_metrics`); the rows with ``view`` v pool the evaluated detections of view v (only
+views that have some); ``<metric>/upright`` pools those whose stored ``upright_score`` (the crop-frame score the
 calibration reads) is at least :data:`UPRIGHT_THRESHOLD`. A figure with nothing to average (e.g. no true
 heights known) is left out rather than written as NaN; with no evaluated detection at all the table is empty.
 """
@@ -201,29 +201,31 @@ def compare_lifted_to_gt(
                             lifted.upright_score[keep])
 
 
-def _rows(c: LifterComparison, sel: np.ndarray, suffix: str) -> list[MetricRow]:
-    """Metric rows of the detections ``sel`` (names get ``suffix``), figures with nothing to average left out."""
+def _rows(c: LifterComparison, sel: np.ndarray, suffix: str, view: int | None = None) -> list[MetricRow]:
+    """Metric rows of the detections ``sel`` (names get ``suffix``, rows get ``view``), figures with nothing to
+    average left out."""
     rows = [
-        MetricRow(f"mpjpe_mm{suffix}", mpjpe_mm(c.lifted_m[sel], c.gt_m[sel], c.compared[sel]), "mm"),
-        MetricRow(f"pa_mpjpe_mm{suffix}", pa_mpjpe_mm(c.lifted_m[sel], c.gt_m[sel], c.compared[sel]), "mm"),
+        MetricRow(f"mpjpe_mm{suffix}", mpjpe_mm(c.lifted_m[sel], c.gt_m[sel], c.compared[sel]), "mm", view),
+        MetricRow(f"pa_mpjpe_mm{suffix}", pa_mpjpe_mm(c.lifted_m[sel], c.gt_m[sel], c.compared[sel]), "mm", view),
     ]
     diff_mm = 1000.0 * (c.height_m[sel] - c.true_height_m[sel])
     diff_mm = diff_mm[np.isfinite(diff_mm)]
     if len(diff_mm):
-        rows += [MetricRow(f"height_error_mm{suffix}", float(np.abs(diff_mm).mean()), "mm"),
-                 MetricRow(f"height_bias_mm{suffix}", float(diff_mm.mean()), "mm")]
-    rows.append(MetricRow(f"num_detections{suffix}", float(sel.sum()), "count"))
+        rows += [MetricRow(f"height_error_mm{suffix}", float(np.abs(diff_mm).mean()), "mm", view),
+                 MetricRow(f"height_bias_mm{suffix}", float(diff_mm.mean()), "mm", view)]
+    rows.append(MetricRow(f"num_detections{suffix}", float(sel.sum()), "count", view))
     return [r for r in rows if np.isfinite(r.value)]
 
 
 def lifter_metrics(comparison: LifterComparison) -> list[MetricRow]:
-    """All lifter metrics of a comparison: pooled, ``/view_<v>`` and ``/upright`` rows (empty when N = 0)."""
+    """All lifter metrics of a comparison: pooled, per view (``view`` set) and ``/upright`` rows (empty when
+    N = 0)."""
     c = comparison
     if len(c) == 0:
         return []
     rows = _rows(c, np.ones(len(c), bool), "")
     for v in np.unique(c.view):
-        rows += _rows(c, c.view == v, f"/view_{int(v)}")
+        rows += _rows(c, c.view == v, "", view=int(v))
     upright = c.upright_score >= UPRIGHT_THRESHOLD  # NaN scores compare False
     if upright.any():
         rows += _rows(c, upright, "/upright")
@@ -251,7 +253,7 @@ def lifter_metrics_table(
 
     Returns:
         Rows ``mpjpe_mm``, ``pa_mpjpe_mm``, ``height_error_mm``, ``height_bias_mm`` (mm) and ``num_detections``
-        (count), each pooled, per view (``/view_<v>``) and over upright detections (``/upright``), see the module
+        (count), each pooled, per view (``view`` column) and over upright detections (``/upright``), see the module
         docstring; an empty table when no detection qualifies.
     """
     comparison = compare_lifted_to_gt(lifted_detections, associations, gt_poses3d, gt_cameras, gt_people)

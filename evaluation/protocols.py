@@ -42,25 +42,34 @@ CANONICAL_PCP_PARTS: dict[str, tuple[int, int]] = {
 
 @dataclass(frozen=True)
 class MetricRow:
-    """One figure of a metric table."""
+    """One figure of a metric table.
+
+    Attributes:
+        metric: the metric's name (units in the name where it has one, e.g. ``mpjpe_mm``).
+        value: the figure.
+        unit: ``mm``, ``px``, ``%``, ``deg``, ``count``, ...
+        view: the view the figure is about; None for a figure that is not per view.
+    """
 
     metric: str
     value: float
     unit: str
+    view: int | None = None
 
 
 def metrics_table(dataset: str, sequence: str, method: str, rows: list[MetricRow]) -> pd.DataFrame:
-    """The canonical ``metrics`` table for one method on one sequence."""
+    """The canonical ``metrics`` table for one method on one sequence (``view`` null where a row has none)."""
     df = pd.DataFrame(
         {
             "dataset": dataset,
             "sequence": sequence,
             "method": method,
             "metric": [r.metric for r in rows],
+            "view": pd.array([r.view for r in rows], dtype="Int32"),
             "value": [float(r.value) for r in rows],
             "unit": [r.unit for r in rows],
         },
-        columns=["dataset", "sequence", "method", "metric", "value", "unit"],
+        columns=["dataset", "sequence", "method", "metric", "view", "value", "unit"],
     )
     return validate_table(df, "metrics")
 

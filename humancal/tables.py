@@ -16,7 +16,8 @@ Tables:
     associations: person id of each detection (-1 = not a person / not associated).
     people:       per person body-model shape (anny phenotypes) and height.
     motions:      per person and frame body-model parameters (later stages write them).
-    metrics:      evaluation figures (dataset, sequence, method, metric, value, unit).
+    metrics:      evaluation figures (dataset, sequence, method, metric, view, value, unit); ``view`` is null for
+                  a figure that is not per view.
 """
 
 from __future__ import annotations
@@ -25,7 +26,16 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-__all__ = ["SCHEMAS", "TableError", "validate_table", "check_values", "empty_table", "to_arrow"]
+__all__ = [
+    "SCHEMAS",
+    "NULLABLE_COLUMNS",
+    "TableError",
+    "validate_table",
+    "check_values",
+    "empty_table",
+    "to_arrow",
+    "table_to_pandas",
+]
 
 
 class TableError(ValueError):
@@ -166,12 +176,17 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("sequence", pa.string()),
             ("method", pa.string()),
             ("metric", pa.string()),
+            ("view", pa.int32()),
             ("value", pa.float64()),
             ("unit", pa.string()),
         ]
     ),
 }
 """The declared schema of every canonical table, by table name."""
+
+NULLABLE_COLUMNS: dict[str, frozenset[str]] = {"metrics": frozenset({"view"})}
+"""Columns that may hold nulls (every other column of every table must be filled), by table name. In pandas a
+nullable integer column is a nullable ``Int32`` column (``pd.NA`` for null)."""
 
 _NON_NEGATIVE_INT = {"frame", "view", "det_id"}
 
@@ -211,7 +226,7 @@ def to_arrow(df: pd.DataFrame, name: str, *, source: str = "") -> pa.Table:
             raise TableError(
                 f"table '{name}'{where}: column '{field.name}' cannot be stored as {field.type}: {err}"
             ) from None
-        if arr.null_count:
+        if arr.null_count and field.name not in NULLABLE_COLUMNS.get(name, ()):
             raise TableError(f"table '{name}'{where}: column '{field.name}' has {arr.null_count} missing value(s)")
         arrays.append(arr)
     return pa.Table.from_arrays(arrays, schema=schema)
@@ -228,7 +243,17 @@ def validate_table(df: pd.DataFrame, name: str, *, source: str = "") -> pd.DataF
     """
     table = to_arrow(df, name, source=source)
     check_values(table, name, source=source)
-    return table.to_pandas()
+    return table_to_pandas(table, name)
+
+
+def table_to_pandas(table: pa.Table, name: str) -> pd.DataFrame:
+    """A stored canonical table as pandas, its nullable integer columns as pandas nullable integers (not float)."""
+    df = table.to_pandas()
+    for col in NULLABLE_COLUMNS.get(_known(name), ()):
+        field = table.schema.field(col)
+        if pa.types.is_integer(field.type):
+            df[col] = df[col].astype(f"Int{field.type.bit_width}")
+    return df
 
 
 def check_values(table: pa.Table, name: str, *, source: str = "") -> None:
@@ -240,7 +265,7 @@ def check_values(table: pa.Table, name: str, *, source: str = "") -> None:
     """
     where = f" ({source})" if source else ""
     for col in sorted(_NON_NEGATIVE_INT & set(table.column_names)):
-        values = table.column(col).to_numpy()
+        values = table.column(col).drop_null().to_numpy()
         if len(values) and (values < 0).any():
             raise TableError(f"table '{name}'{where}: column '{col}' must be >= 0, got {int(values.min())}")
     finite_cols = {

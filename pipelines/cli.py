@@ -97,8 +97,11 @@ def _stored_metrics(partitions: list[str] | None, headline_only: bool):
     if not files:
         raise SystemExit("humancal: no metric tables stored yet; run `humancal demo` or `humancal update` first")
     table = pd.concat([pd.read_parquet(str(f)) for f in files], ignore_index=True)
-    if headline_only:
-        table = table[~table["metric"].str.contains("/", regex=False)]
+    if "view" not in table.columns:  # stored before metric tables had a view column
+        table.insert(table.columns.get_loc("metric") + 1, "view", pd.NA)
+    table["view"] = table["view"].astype("Int32")
+    if headline_only:  # headline: not per view, no per-joint / per-group suffix
+        table = table[table["view"].isna() & ~table["metric"].str.contains("/", regex=False)].drop(columns="view")
     return table
 
 

@@ -25,7 +25,7 @@ import torch
 from dagster._core.storage.upath_io_manager import UPathIOManager
 from upath import UPath
 
-from humancal.tables import SCHEMAS, check_values, to_arrow
+from humancal.tables import SCHEMAS, check_values, table_to_pandas, to_arrow
 
 TABLE_METADATA_KEY = "humancal/table"
 """Asset metadata naming the canonical table an asset holds (validated on every write)."""
@@ -113,7 +113,7 @@ class ParquetTableIOManager(_AtomicUPathIOManager):
         name = (context.upstream_output.definition_metadata or {}).get(TABLE_METADATA_KEY) if context.upstream_output else None
         if name is not None and not table.schema.equals(SCHEMAS[name]):
             raise ArtifactError(f"{path}: stored schema differs from the declared '{name}' table; rematerialize it")
-        return table.to_pandas()
+        return table.to_pandas() if name is None else table_to_pandas(table, name)
 
     def get_metadata(self, context: dg.OutputContext, obj: pd.DataFrame) -> dict[str, Any]:
         return {"rows": dg.MetadataValue.int(len(obj)), "columns": dg.MetadataValue.text(", ".join(map(str, obj.columns)))}

@@ -98,17 +98,20 @@ def test_metric_rows_and_table():
     rig = _rig(3)
     det, ass = _people_tables(rig, noise_px=1.0)
     rows = camera_metrics(rig, rig, det, ass)
-    names = {r.metric for r in rows}
+    names = {(r.metric, r.view) for r in rows}
     for base in ("focal_error_pct", "position_error_mm", "angle_error_deg", "reprojection_error_px",
                  "reprojection_error_gt_cameras_px"):
-        assert base in names and {f"{base}/view_{v}" for v in range(3)} <= names
+        assert (base, None) in names and {(base, v) for v in range(3)} <= names
+    assert not any("/" in r.metric for r in rows)
     units = {r.metric: r.unit for r in rows}
     assert units["focal_error_pct"] == "%" and units["position_error_mm"] == "mm"
     assert units["angle_error_deg"] == "deg" and units["reprojection_error_px"] == "px"
-    value = {r.metric: r.value for r in rows}
+    value = {r.metric: r.value for r in rows if r.view is None}
     assert value["reprojection_error_px"] == pytest.approx(value["reprojection_error_gt_cameras_px"])
     assert 0.3 < value["reprojection_error_px"] < 2.0
     table = camera_metrics_table("synthetic", "s", rig, rig)
     assert set(table["method"]) == {"init"} and len(table) == 3 * 4
+    assert str(table["view"].dtype) == "Int32" and table["view"].isna().sum() == 3
+    assert table.groupby("metric")["view"].apply(lambda v: sorted(v.dropna())).tolist() == [[0, 1, 2]] * 3
     with pytest.raises(ValueError, match="rigs differ"):
         camera_errors(rig[:2], rig)

@@ -53,7 +53,10 @@ def _dets(dets: list[np.ndarray], frame: int = 0, view: int = 0) -> pd.DataFrame
 
 
 def _metrics(ev) -> pd.Series:
-    return ev.metrics.set_index("metric")["value"]
+    """Values by metric name, per-view rows as ``<metric>@<view>``."""
+    m = ev.metrics
+    names = [n if pd.isna(v) else f"{n}@{v}" for n, v in zip(m["metric"], m["view"])]
+    return pd.Series(m["value"].to_numpy(), index=names)
 
 
 def test_perfect_detections_of_two_people():
@@ -64,7 +67,7 @@ def test_perfect_detections_of_two_people():
     noise = [rng.normal(0, 2.0, (12, 2)) for _ in range(2)]
     ev = evaluate_grouping(_dets([proj[3] + noise[0], proj[0] + noise[1]]), _gt(people), [cam], dataset="toy")
     m = _metrics(ev)
-    assert m["detection_recall"] == 1.0 and m["detection_recall/view_0"] == 1.0
+    assert m["detection_recall"] == 1.0 and m["detection_recall@0"] == 1.0
     assert m["detection_fragment_rate"] == 0.0
     assert m["gt_person_views"] == 2 and m["matched_detections"] == 2
     expected = np.median(np.linalg.norm(np.concatenate(noise), axis=1))
@@ -73,7 +76,7 @@ def test_perfect_detections_of_two_people():
     assert pv.loc[3, "det_id"] == 0 and pv.loc[0, "det_id"] == 1
     validate_table(ev.metrics, "metrics")
     assert set(ev.metrics["method"]) == {"grouping"} and set(ev.metrics["dataset"]) == {"toy"}
-    assert ev.metrics.set_index("metric").loc["median_joint_error_px", "unit"] == "px"
+    assert set(ev.metrics.loc[ev.metrics["metric"] == "median_joint_error_px", "unit"]) == {"px"}
 
 
 def test_fragment_and_far_detection():
@@ -137,9 +140,9 @@ def test_per_view_rows_and_frames_without_ground_truth():
     )
     ev = evaluate_grouping(dets, _gt(people), cams, dataset="toy")
     m = _metrics(ev)
-    assert m["detection_recall/view_0"] == 1.0 and m["detection_recall/view_1"] == 0.0
+    assert m["detection_recall@0"] == 1.0 and m["detection_recall@1"] == 0.0
     assert m["detection_recall"] == 0.5 and m["gt_person_views"] == 2
-    assert m["detections"] == 3 and m["detections/view_0"] == 2
+    assert m["detections"] == 3 and m["detections@0"] == 2
     assert not ev.detections.query("frame == 1")["fragment"].any()
 
 

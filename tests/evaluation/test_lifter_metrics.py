@@ -66,7 +66,8 @@ def _metrics(scene, lifted, associations=None, gt=None, people=None):
                                  scene.associations if associations is None else associations,
                                  scene.poses3d if gt is None else gt, scene.cameras,
                                  scene.people if people is None else people)
-    return table.set_index("metric")["value"]
+    names = [n if pd.isna(v) else f"{n}@{v}" for n, v in zip(table["metric"], table["view"])]
+    return pd.Series(table["value"].to_numpy(), index=names)  # per-view rows as "<metric>@<view>"
 
 
 def _evaluated_count(lifted, associations):
@@ -105,10 +106,10 @@ def test_a_lifter_that_knows_the_truth_has_no_error(scene):
     assert m["height_error_mm"] < 1e-9 and abs(m["height_bias_mm"]) < 1e-9
     n = _evaluated_count(lifted, scene.associations)
     assert m["num_detections"] == n and n > 50
-    views = sorted(k for k in m.index if k.startswith("num_detections/view_"))
-    assert views == [f"num_detections/view_{v}" for v in range(3)]
+    views = sorted(k for k in m.index if k.startswith("num_detections@"))
+    assert views == [f"num_detections@{v}" for v in range(3)]
     assert sum(m[k] for k in views) == n
-    assert all(m[f"mpjpe_mm/view_{v}"] < 1e-6 for v in range(3))
+    assert all(m[f"mpjpe_mm@{v}"] < 1e-6 for v in range(3))
     early = scene.associations[(scene.associations["person_id"] >= 0) & (scene.associations["frame"] < UPRIGHT_FRAMES)]
     assert m["num_detections/upright"] == len(early) and 0 < len(early) < n
     assert m["mpjpe_mm/upright"] < 1e-6
@@ -124,7 +125,7 @@ def test_an_offset_of_every_joint_but_the_hips_gives_the_expected_mpjpe(scene):
     m = _metrics(scene, _perfect_lift(scene, offset_m=(0.05, 0.0, 0.0)))
     expected = 50.0 * 21 / 23
     assert m["mpjpe_mm"] == pytest.approx(expected, abs=1e-6)
-    assert all(m[f"mpjpe_mm/view_{v}"] == pytest.approx(expected, abs=1e-6) for v in range(3))
+    assert all(m[f"mpjpe_mm@{v}"] == pytest.approx(expected, abs=1e-6) for v in range(3))
     assert m["pa_mpjpe_mm"] < m["mpjpe_mm"]
     assert m["height_error_mm"] < 1e-9  # the height column was not touched
     assert m["mpjpe_mm/upright"] == pytest.approx(expected, abs=1e-6)
@@ -184,7 +185,7 @@ def test_nothing_matched_gives_an_empty_table(scene):
                              scene.cameras, scene.people),
     ):
         assert len(table) == 0
-        assert list(table.columns) == ["dataset", "sequence", "method", "metric", "value", "unit"]
+        assert list(table.columns) == ["dataset", "sequence", "method", "metric", "view", "value", "unit"]
 
 
 def test_shelf_style_ground_truth_compares_the_12_shared_joints_about_the_hip_midpoint(scene):

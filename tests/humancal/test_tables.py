@@ -46,3 +46,16 @@ def test_missing_and_extra_columns_are_errors():
         validate_table(_detections().assign(extra=1), "detections")
     with pytest.raises(TableError, match="unknown table"):
         validate_table(_detections(), "detectionz")
+
+
+def test_metrics_view_is_the_one_nullable_column():
+    rows = pd.DataFrame({"dataset": "d", "sequence": "s", "method": "m", "metric": ["a", "a"],
+                         "view": [None, 2], "value": [1.0, 2.0], "unit": "px"})
+    out = validate_table(rows, "metrics")
+    assert str(out["view"].dtype) == "Int32" and out["view"].isna().tolist() == [True, False] and out["view"][1] == 2
+    with pytest.raises(TableError, match="column 'view' must be >= 0"):
+        validate_table(rows.assign(view=[None, -1]), "metrics")
+    with pytest.raises(TableError, match="column 'metric' has 1 missing"):
+        validate_table(rows.assign(metric=[None, "a"]), "metrics")
+    with pytest.raises(TableError, match="column 'view' has 1 missing"):
+        validate_table(_detections(view=[None, 0]), "detections")

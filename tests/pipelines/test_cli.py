@@ -29,24 +29,40 @@ def test_report_prints_stored_tables_as_csv(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
     folder = tmp_path / "artifacts" / "metric_tables"
     folder.mkdir(parents=True)
-    pd.DataFrame({"dataset": ["d"], "sequence": ["s"], "method": ["m"], "metric": ["mpjpe_mm"], "value": [12.5], "unit": ["mm"]}
-                 ).to_parquet(folder / "d__s.parquet")
+    pd.DataFrame({"dataset": ["d"], "sequence": ["s"], "method": ["m"], "metric": ["mpjpe_mm"], "view": [None],
+                  "value": [12.5], "unit": ["mm"]}).to_parquet(folder / "d__s.parquet")
     assert main(["report", "--partition", "d__s", "--format", "csv"]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0] == "dataset,sequence,method,metric,value,unit" and out[1] == "d,s,m,mpjpe_mm,12.5,mm"
+    assert out[0] == "dataset,sequence,method,metric,view,value,unit" and out[1] == "d,s,m,mpjpe_mm,,12.5,mm"
     with pytest.raises(SystemExit, match="no metric table stored"):
         main(["report", "--partition", "x__y"])
+
+
+def test_report_headline_leaves_out_per_view_and_suffixed_rows(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    folder = tmp_path / "artifacts" / "metric_tables"
+    folder.mkdir(parents=True)
+    pd.DataFrame({"dataset": "synthetic", "sequence": "demo", "method": "init",
+                  "metric": ["focal_error_pct", "focal_error_pct", "focal_error_pct", "pcp_avg/head"],
+                  "view": pd.array([None, 0, 1, None], dtype="Int32"), "value": [1.5, 1.0, 2.0, 90.0],
+                  "unit": ["%", "%", "%", "%"]}).to_parquet(folder / "synthetic__demo.parquet")
+    assert main(["report", "--partition", "synthetic__demo"]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if "focal_error_pct" in line or "pcp" in line]
+    assert len(lines) == 1 and "1.50" in lines[0]
+    assert main(["report", "--partition", "synthetic__demo", "--all"]) == 0
+    out = capsys.readouterr().out
+    assert "view" in out.splitlines()[0] and out.count("focal_error_pct") == 3 and "pcp_avg/head" in out
 
 
 def test_report_includes_the_lifters_held_out_table(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
     (tmp_path / "artifacts" / "metric_tables").mkdir(parents=True)
     row = {"dataset": ["cmu_mocap"], "sequence": ["held_out_02_14"], "method": ["lifter"], "metric": ["pa_mpjpe_mm"],
-           "value": [49.5], "unit": ["mm"]}
+           "view": [None], "value": [49.5], "unit": ["mm"]}
     pd.DataFrame(row).to_parquet(tmp_path / "artifacts" / "lifter_heldout_metrics.parquet")
     pd.DataFrame({**row, "dataset": ["d"], "sequence": ["s"]}).to_parquet(tmp_path / "artifacts" / "metric_tables" / "d__s.parquet")
     assert main(["report", "--partition", "cmu_mocap__held_out_02_14", "--format", "csv"]) == 0
-    assert capsys.readouterr().out.splitlines()[1] == "cmu_mocap,held_out_02_14,lifter,pa_mpjpe_mm,49.5,mm"
+    assert capsys.readouterr().out.splitlines()[1] == "cmu_mocap,held_out_02_14,lifter,pa_mpjpe_mm,,49.5,mm"
     assert main(["report", "--format", "csv"]) == 0
     assert len(capsys.readouterr().out.splitlines()) == 3  # header, the held-out row, the sequence row
 
