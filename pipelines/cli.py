@@ -210,10 +210,25 @@ def cmd_export(args) -> int:
         folders = write_openpose(_stored_table("raw_detections", args.partition), args.out, overwrite=args.overwrite)
         print(f"wrote OpenPose JSON for {len(folders)} views under {args.out}")
     else:
-        cameras = cameras_from_table(_stored_table(args.cameras_asset, args.partition))
+        asset = _cameras_asset(args)
+        cameras = cameras_from_table(_stored_table(asset, args.partition))
         path = write_cameras(cameras, args.out, args.format)
-        print(f"wrote {len(cameras)} cameras ({args.format}) to {path}")
+        what = CAMERA_ASSETS.get(asset, "stored")
+        print(f"wrote {len(cameras)} {what} cameras (asset {asset}, format {args.format}) to {path}")
     return 0
+
+
+CAMERA_ASSETS = {"extrinsics": "estimated", "gt_cameras": "ground-truth"}
+"""Stored camera tables ``export cameras`` knows by what they are; ``extrinsics`` is the default."""
+
+
+def _cameras_asset(args) -> str:
+    """The estimated cameras unless the ground truth (or another stored cameras table) is asked for by name."""
+    if args.ground_truth and args.cameras_asset not in (None, "gt_cameras"):
+        raise SystemExit(f"humancal: --ground-truth and --cameras-asset {args.cameras_asset} contradict each other")
+    if args.ground_truth:
+        return "gt_cameras"
+    return args.cameras_asset or "extrinsics"
 
 
 def cmd_ui(args) -> int:
@@ -248,7 +263,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", required=True,
                    help="openpose (detections); humancal, shelf, pose2sim, anipose, easymocap, colmap (cameras)")
     p.add_argument("--out", required=True, help="output folder (detections, easymocap, colmap) or file")
-    p.add_argument("--cameras-asset", default="gt_cameras", help="which stored cameras table to export")
+    p.add_argument("--cameras-asset", default=None,
+                   help="which stored cameras table to export (default: extrinsics, the estimated cameras)")
+    p.add_argument("--ground-truth", action="store_true",
+                   help="export the dataset's ground-truth cameras (gt_cameras) instead of the estimated ones")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_export)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
