@@ -2,17 +2,14 @@
 
 
 import base64
-import hashlib
 import warnings
 from pathlib import Path
 
 import dagster as dg
 import pandas as pd
-import pyarrow as pa
 
-from humancal.tables import to_arrow
-from pipelines.partitions import SEQUENCES
-from resources.io_managers import TABLE_METADATA_KEY
+from assets.partitions import SEQUENCES
+from resources.io_managers import TABLE_METADATA_KEY, table_content_version
 
 AC = dg.AutomationCondition
 
@@ -25,6 +22,10 @@ UPDATE_CONDITION = (
 """When ``humancal update`` (or the automation sensor) recomputes an asset partition: it was never
 materialized, its code_version changed, or an upstream asset produced different data."""
 
+
+ON_REQUEST_KEY = "humancal/on_request"
+"""Asset metadata marking an asset that ``humancal update`` never computes on its own (e.g. ``lifter_trained``:
+fifteen minutes of training); the value names the command that does."""
 
 REQUIRES_DATA_KEY = "humancal/requires_data"
 """Asset metadata naming the data-root folder an unpartitioned asset reads (e.g. ``cmu_mocap``)."""
@@ -48,12 +49,12 @@ def sequence_asset(table: str, code_version: str, **kwargs):
 
 
 def table_data_version(df: pd.DataFrame, name: str) -> dg.DataVersion:
-    """Content hash of a canonical table (so identical outputs do not trigger downstream work)."""
-    table = to_arrow(df, name)
-    sink = pa.BufferOutputStream()
-    with pa.ipc.new_stream(sink, table.schema) as writer:
-        writer.write_table(table)
-    return dg.DataVersion(hashlib.sha256(sink.getvalue().to_pybytes()).hexdigest()[:16])
+    """Content hash of a canonical table (so identical outputs do not trigger downstream work).
+
+    ``humancal update`` recomputes the same hash from the stored file to notice a damaged artifact
+    (:func:`resources.io_managers.table_content_version` is the one definition).
+    """
+    return dg.DataVersion(table_content_version(df, name))
 
 
 def versioned_output(value, data_version: str, output_name: str = "result", **metadata) -> dg.Output:

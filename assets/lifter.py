@@ -1,4 +1,5 @@
-"""Shared by all sequences: the 2D-to-3D lifter trained on the retargeted CMU mocap, and its held-out figures."""
+"""Shared by all sequences: the 2D-to-3D lifter (shipped, or trained here on the retargeted CMU mocap) and its
+held-out figures."""
 
 import tempfile
 from pathlib import Path
@@ -7,11 +8,12 @@ import dagster as dg
 import pandas as pd
 import torch
 
-from assets.common import UPDATE_CONDITION, png_metadata, table_metadata, table_output, versioned_output
+from assets.common import ON_REQUEST_KEY, UPDATE_CONDITION, png_metadata, table_metadata, table_output, versioned_output
 from evaluation.protocols import MetricRow, metrics_table
 from humancal.lifter import (
     HELD_OUT_CMU_SUBJECTS,
     LifterConfig,
+    LifterWeightsError,
     checkpoint_digest,
     checkpoint_num_bytes,
     held_out_report,
@@ -21,6 +23,7 @@ from humancal.lifter import (
     train_lifter,
 )
 from humancal.retarget import motions_table_to_clips
+from resources.lifter_source import active_lifter
 
 TRAINING_THREADS = 1
 """torch threads while training: the network is small, and on a 2-core machine shared with other work two
@@ -51,21 +54,33 @@ def _subject_clips(motions: pd.DataFrame) -> list[tuple[str, object]]:
     return [(clip.subject, clip.keypoints_world_m) for clip in motions_table_to_clips(motions)]
 
 
-def build_lifter_assets(config: LifterConfig) -> list[dg.AssetsDefinition]:
-    """The ``lifter_checkpoint`` and ``lifter_heldout_metrics`` assets for a training configuration.
+def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.AssetsDefinition]:
+    """The lifter assets: ``lifter_trained`` (trained here), ``lifter_checkpoint`` (the one the graph uses) and
+    ``lifter_heldout_metrics``.
 
-    The configuration's digest is part of the code version, so changing it marks the checkpoint stale.
+    ``lifter_checkpoint`` serves the weights shipped with the package until ``lifter_trained`` has been
+    materialized under ``storage_root`` (``humancal train lifter``, or the retraining schedule); from then on it
+    serves the trained ones. Which one is active is decided when the definitions load, and is part of the code
+    version, so training (or deleting the trained checkpoint) makes the checkpoint stale, and the lifted
+    detections follow it through the normal data-version lineage.
+
+    Args:
+        config: training configuration of ``lifter_trained`` (its digest is part of that asset's code version).
+        storage_root: the artifacts root where ``lifter_trained`` is stored.
     """
-    code_version = f"1-{config.digest()}"
+    active = active_lifter(storage_root)
 
     @dg.asset(
         group_name="lifter",
         io_manager_key="checkpoint_io_manager",
-        code_version=code_version,
+        code_version=f"1-{config.digest()}",
+        metadata={ON_REQUEST_KEY: "humancal train lifter"},
         automation_condition=UPDATE_CONDITION,
     )
-    def lifter_checkpoint(context: dg.AssetExecutionContext, mocap_clips: pd.DataFrame) -> dg.Output:
-        """The 2D-to-3D lifter trained on the retargeted CMU clips, subjects 02 and 14 held out (docs/lifter.md)."""
+    def lifter_trained(context: dg.AssetExecutionContext, mocap_clips: pd.DataFrame) -> dg.Output:
+        """The 2D-to-3D lifter trained here on the retargeted CMU clips, subjects 02 and 14 held out
+        (docs/lifter.md). Trained on request (``humancal train lifter`` or the weekly schedule), never by a
+        plain update: the shipped weights serve until then."""
         train, val = split_held_out(_subject_clips(mocap_clips))
         context.log.info(
             f"training the lifter on {len(train)} clips ({sum(len(k) for _, k in train)} frames), "
@@ -106,6 +121,35 @@ def build_lifter_assets(config: LifterConfig) -> list[dg.AssetsDefinition]:
 
     @dg.asset(
         group_name="lifter",
+        io_manager_key="checkpoint_io_manager",
+        code_version=f"2-{active.source}-{active.digest[:16]}",
+        automation_condition=UPDATE_CONDITION,
+    )
+    def lifter_checkpoint(context: dg.AssetExecutionContext) -> dg.Output:
+        """The lifter every sequence is lifted with: the weights shipped with humancal, or, once
+        ``humancal train lifter`` has run, the ones trained here (``lifter_trained``)."""
+        checkpoint = active.load()
+        digest = checkpoint_digest(checkpoint)
+        if digest != active.digest:
+            raise LifterWeightsError(
+                f"{active.path}: its digest changed since the definitions loaded ({active.digest[:16]} -> "
+                f"{digest[:16]}); reload the definitions (restart `humancal` or reload the code location)"
+            )
+        context.log.info(active.describe())
+        metrics = checkpoint.get("val_metrics", {})
+        return versioned_output(
+            checkpoint,
+            digest[:16],
+            source=active.source,
+            path=str(active.path),
+            description=active.describe(),
+            val_pa_mpjpe_mm=round(float(metrics.get("pa_mpjpe_mm", float("nan"))), 2),
+            train_subjects=", ".join(checkpoint["train_subjects"]),
+            held_out_subjects=", ".join(checkpoint["val_subjects"]),
+        )
+
+    @dg.asset(
+        group_name="lifter",
         metadata=table_metadata("metrics"),
         code_version="1",
         automation_condition=UPDATE_CONDITION,
@@ -128,4 +172,4 @@ def build_lifter_assets(config: LifterConfig) -> list[dg.AssetsDefinition]:
         return table_output(table, "metrics", rows=len(table),
                             summary=dg.MetadataValue.md(report.to_markdown(floatfmt=".1f")))
 
-    return [lifter_checkpoint, lifter_heldout_metrics]
+    return [lifter_trained, lifter_checkpoint, lifter_heldout_metrics]

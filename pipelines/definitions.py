@@ -38,17 +38,29 @@ def build_definitions(
 
     Args:
         storage_root: artifact folder or fsspec URL.
-        lifter_config: training configuration of ``lifter_checkpoint`` (default :meth:`LifterConfig.default`;
-            tests use a small one).
+        lifter_config: training configuration of ``lifter_trained`` (default :meth:`LifterConfig.default`, the
+            configuration of the shipped weights; tests use a small one).
         datasets: the datasets resource (default: the packaged config and ``HUMANCAL_DATA_DIR``).
     """
     root = storage_root or artifacts_root()
-    lifter_assets = build_lifter_assets(lifter_config or LifterConfig.default())
+    lifter_assets = build_lifter_assets(lifter_config or LifterConfig.default(), root)
+    lifter_training = dg.define_asset_job(
+        "lifter_training_job", selection=dg.AssetSelection.assets("mocap_clips", "lifter_trained"),
+        description="Retarget the CMU mocap of the data root and train the lifter on it (it then replaces the "
+                    "shipped weights; `humancal update` re-lifts every sequence with it).")
     return dg.Definitions(
         assets=[*SHARED_ASSETS, *lifter_assets, *PER_SEQUENCE_ASSETS],
         jobs=[
             dg.define_asset_job("sequence_job", selection=dg.AssetSelection.groups("sequence"),
                                 description="Every per-sequence asset of one partition."),
+            lifter_training,
+        ],
+        schedules=[
+            dg.ScheduleDefinition(
+                name="weekly_lifter_retraining", job=lifter_training, cron_schedule="0 3 * * 0",
+                default_status=dg.DefaultScheduleStatus.STOPPED,
+                description="Sundays 03:00: retrain the lifter on the mocap under the data root (turn on in the UI).",
+            ),
         ],
         resources={
             "io_manager": ParquetIOManagerFactory(base_path=root),

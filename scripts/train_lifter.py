@@ -8,9 +8,12 @@ the table is written there for the next run. ``--synthetic`` trains on procedura
 
 Prints the per-epoch losses, the held-out MPJPE / PA-MPJPE (mm; overall and by how much of the body the
 detection shows), the training wall time and the checkpoint size, and saves the checkpoint (a plain dict,
-``torch.load(..., weights_only=True)``) to ``--out``, never inside the repository.
+``torch.load(..., weights_only=True)``) to ``--out``, never inside the repository. ``--ship`` also writes the
+weights humancal ships (``humancal/weights/lifter.safetensors`` and its ``.json`` sidecar with the training
+configuration, digest and held-out figures); that is how the shipped weights were made.
 
     python scripts/train_lifter.py [--out /tmp/humancal_lifter/lifter.pt] [--val-subjects 02,14] [--threads 1]
+    python scripts/train_lifter.py --ship            # retrain the shipped weights (about 15 minutes on 2 cores)
 """
 
 from __future__ import annotations
@@ -26,7 +29,15 @@ import numpy as np
 import pandas as pd
 import torch
 
-from humancal.lifter import HELD_OUT_CMU_SUBJECTS, LifterConfig, held_out_report, load_lifter, train_lifter
+from humancal.lifter import (
+    HELD_OUT_CMU_SUBJECTS,
+    SHIPPED_LIFTER_STEM,
+    LifterConfig,
+    held_out_report,
+    load_lifter,
+    train_lifter,
+    write_lifter_weights,
+)
 from humancal.lifter.evaluate import HELD_OUT_EVAL_SAMPLES
 from humancal.settings import REPO_ROOT, dataset_dir
 
@@ -83,11 +94,12 @@ def _print_epoch(record: dict) -> None:
         )
 
 
-def _held_out_report(checkpoint: dict, val_clips: list[tuple[str, np.ndarray]]) -> None:
+def _held_out_report(checkpoint: dict, val_clips: list[tuple[str, np.ndarray]]) -> pd.DataFrame:
     """Fresh held-out samples (another seed than validation), through the whole inference path."""
     table = held_out_report(load_lifter(checkpoint), val_clips).drop(columns="num_samples")
     print(f"\nheld-out subjects, {HELD_OUT_EVAL_SAMPLES} fresh samples (root-relative, mm):")
     print(table.to_string(float_format=lambda v: f"{v:.1f}"))
+    return table
 
 
 def main() -> None:
@@ -106,7 +118,14 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, help="override LifterConfig.epochs")
     parser.add_argument("--samples-per-epoch", type=int, help="override LifterConfig.samples_per_epoch")
     parser.add_argument("--seed", type=int, default=0, help="LifterConfig.seed")
+    parser.add_argument("--ship", action="store_true",
+                        help="also write the weights shipped with humancal (humancal/weights/lifter.safetensors + "
+                             ".json, with the held-out figures); only for the default configuration on the CMU mocap")
+    parser.add_argument("--from-checkpoint", type=Path,
+                        help="skip training: report (and with --ship, ship) this checkpoint written by an earlier run")
     args = parser.parse_args()
+    if args.ship and (args.synthetic or args.epochs or args.samples_per_epoch):
+        parser.error("--ship is for the default configuration trained on the CMU mocap")
     out = args.out.resolve()
     if out.is_relative_to(REPO_ROOT):
         parser.error(f"--out {out} is inside the repository; checkpoints are artifacts, keep them outside")
@@ -131,15 +150,32 @@ def main() -> None:
     config = LifterConfig.default().replace(seed=args.seed, **overrides)
     print(f"config: width {config.width}, {config.num_blocks} blocks, {config.epochs} epochs x "
           f"{config.samples_per_epoch} samples, batch {config.batch_size}, {args.threads} thread(s)")
-    start = time.perf_counter()
-    checkpoint, _ = train_lifter(train, val, config, progress=_print_epoch)
-    train_s = time.perf_counter() - start
-
-    out.parent.mkdir(parents=True, exist_ok=True)
-    partial = out.with_suffix(".partial")
-    torch.save(checkpoint, partial)
-    os.replace(partial, out)
-    _held_out_report(checkpoint, val)
+    if args.from_checkpoint:
+        checkpoint = torch.load(args.from_checkpoint, map_location="cpu", weights_only=True)
+        if checkpoint["config"] != config.to_dict():
+            parser.error(f"{args.from_checkpoint} was trained with another configuration than the one asked for")
+        train_s = float(checkpoint["training_time_s"])
+        out = args.from_checkpoint.resolve()
+    else:
+        start = time.perf_counter()
+        checkpoint, _ = train_lifter(train, val, config, progress=_print_epoch)
+        train_s = time.perf_counter() - start
+        out.parent.mkdir(parents=True, exist_ok=True)
+        partial = out.with_suffix(".partial")
+        torch.save(checkpoint, partial)
+        os.replace(partial, out)
+    report = _held_out_report(checkpoint, val)
+    if args.ship:
+        info = {
+            "trained_with": f"python scripts/train_lifter.py --seed {args.seed} --threads {args.threads} "
+                            "(LifterConfig.default(), CMU mocap retargeted onto anny)",
+            "torch_version": torch.__version__,
+            "held_out": {group: {k: round(float(v), 2) for k, v in row.items()}
+                         for group, row in report.to_dict(orient="index").items()},
+            "held_out_samples": HELD_OUT_EVAL_SAMPLES,
+        }
+        sidecar = write_lifter_weights(checkpoint, SHIPPED_LIFTER_STEM, info)
+        print(f"shipped weights written to {SHIPPED_LIFTER_STEM}.safetensors / .json (digest {sidecar['digest'][:16]})")
     final = checkpoint["val_metrics"]
     print(f"\nvalidation ({config.validation_samples} samples): MPJPE {final['mpjpe_mm']:.1f} mm, "
           f"PA-MPJPE {final['pa_mpjpe_mm']:.1f} mm")

@@ -31,13 +31,29 @@ from humancal.lifter.features import (
 )
 from humancal.lifter.infer import CHECKPOINT_FORMAT, LiftedPoses, Lifter, lift_detections, lift_features, load_lifter
 from humancal.lifter.model import LifterNet
-from humancal.lifter.pose_cues import height_chain_m, height_from_pose_m, upright_score
+from humancal.lifter.pose_cues import height_chain_m, height_from_pose_m, standing_score, upright_score
 from humancal.lifter.plot import plot_training_history
 from humancal.lifter.table import lift_detections_table, lifted_from_table, lifted_to_table
 from humancal.lifter.train import checkpoint_digest, checkpoint_num_bytes, mpjpe_loss_m, train_lifter
+from humancal.lifter.weights import (
+    SHIPPED_LIFTER_STEM,
+    LifterWeightsError,
+    read_lifter_info,
+    read_lifter_weights,
+    shipped_checkpoint,
+    shipped_info,
+    write_lifter_weights,
+)
 
 __all__ = [
     "CHECKPOINT_FORMAT",
+    "SHIPPED_LIFTER_STEM",
+    "LifterWeightsError",
+    "read_lifter_info",
+    "read_lifter_weights",
+    "shipped_checkpoint",
+    "shipped_info",
+    "write_lifter_weights",
     "LiftedPoses",
     "Lifter",
     "LifterConfig",
@@ -74,5 +90,6 @@ __all__ = [
     "synthesize_samples",
     "train_lifter",
     "training_noise",
+    "standing_score",
     "upright_score",
 ]
