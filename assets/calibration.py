@@ -11,31 +11,26 @@ import threadpoolctl
 
 from assets.checks import check_result
 from assets.common import png_metadata, sequence_asset, table_output
+from assets.settings import ExtrinsicsSettings, IntrinsicsSettings
 from humancal.calibration import (
-    ExtrinsicsConfig,
-    IntrinsicsConfig,
     estimate_extrinsics,
     estimate_intrinsics,
     intrinsics_from_table,
     intrinsics_to_table,
     plot_rigs,
 )
-from humancal.calibration.types import LiftedPoses as CalibrationLifted
 from humancal.camera import cameras_to_table
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
 from humancal.validation import CheckReport, check_cameras_valid, check_focal_plausible, check_rig_geometry
+from resources.torch import TorchResource
 
 MIN_UPRIGHT_PER_VIEW = 20
 """Below this many upright standing detections in a view, the intrinsics check warns."""
 
-INTRINSICS_CONFIG = IntrinsicsConfig(missing_upright="defer")
-"""A view without upright people is deferred to the multi-view focal recovery of the extrinsics step."""
-
 
 def _calibration_inputs(detections: pd.DataFrame):
-    dense, lifted = lifted_from_table(detections)
-    return dense, CalibrationLifted.from_lifter(lifted)
+    return lifted_from_table(detections)
 
 
 def _image_sizes(views: pd.DataFrame) -> list[tuple[int, int]]:
@@ -50,10 +45,14 @@ def _single_threaded_blas():
 
 
 @sequence_asset("lifted_detections", code_version="1")
-def detections(context: dg.AssetExecutionContext, raw_detections: pd.DataFrame, lifter_checkpoint: dict) -> dg.Output:
+def detections(
+    context: dg.AssetExecutionContext, torch_runtime: TorchResource, raw_detections: pd.DataFrame,
+    lifter_checkpoint: dict,
+) -> dg.Output:
     """Every 2D detection with its lifted root-relative 3D pose (crop frame), height and upright score."""
     start = time.perf_counter()
-    table = lift_detections_table(load_lifter(lifter_checkpoint), raw_detections, context.partition_key)
+    with torch_runtime.applied() as device:
+        table = lift_detections_table(load_lifter(lifter_checkpoint, device), raw_detections, context.partition_key)
     first = table.iloc[::NUM_JOINTS]  # one row per detection
     lifted = first["lifted"].to_numpy(bool)
     upright = first["upright_score"].to_numpy()[lifted]
@@ -77,13 +76,15 @@ def detections(context: dg.AssetExecutionContext, raw_detections: pd.DataFrame, 
                           description=f"at least {MIN_UPRIGHT_PER_VIEW} upright standing detections per view (warns)"),
     ],
 )
-def intrinsics(context: dg.AssetExecutionContext, detections: pd.DataFrame, views: pd.DataFrame):
+def intrinsics(
+    context: dg.AssetExecutionContext, config: IntrinsicsSettings, detections: pd.DataFrame, views: pd.DataFrame
+):
     """Per view: focal length from the upright people's vertical vanishing point and heights (the paper's III-B),
     with the diagnostics (inliers, vanishing point, camera height and tilt, conditioning)."""
     start = time.perf_counter()
     dense, lifted = _calibration_inputs(detections)
     with _single_threaded_blas():
-        estimates = estimate_intrinsics(dense, lifted, _image_sizes(views), INTRINSICS_CONFIG)
+        estimates = estimate_intrinsics(dense, lifted, _image_sizes(views), config.to_library())
     table = intrinsics_to_table(context.partition_key, estimates)
     seconds = time.perf_counter() - start
     context.log.info(f"intrinsics of {len(estimates)} views in {seconds:.1f} s")
@@ -139,7 +140,11 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
     ],
 )
 def extrinsics(
-    context: dg.AssetExecutionContext, detections: pd.DataFrame, intrinsics: pd.DataFrame, views: pd.DataFrame
+    context: dg.AssetExecutionContext,
+    config: ExtrinsicsSettings,
+    detections: pd.DataFrame,
+    intrinsics: pd.DataFrame,
+    views: pd.DataFrame,
 ):
     """The calibrated cameras: rotations from aligned lifted poses, translations, focal lengths refined (and
     recovered where single views could not observe them) by a multi-view bundle adjustment; world Z up, floor
@@ -147,7 +152,7 @@ def extrinsics(
     start = time.perf_counter()
     dense, lifted = _calibration_inputs(detections)
     with _single_threaded_blas():
-        result = estimate_extrinsics(dense, lifted, intrinsics_from_table(intrinsics), ExtrinsicsConfig())
+        result = estimate_extrinsics(dense, lifted, intrinsics_from_table(intrinsics), config.to_library())
     table = cameras_to_table(result.cameras, context.partition_key)
     seconds = time.perf_counter() - start
     floor = result.diagnostics.floor

@@ -13,9 +13,11 @@ from assets.registry import sequence_registry
 from assets.sequence_inputs import sequence_inputs
 from humancal.lifter import LifterConfig
 from humancal.settings import state_dir
+from pipelines.sensors import capture_inbox
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
 from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFactory
+from resources.torch import TorchResource
 
 PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, metric_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
@@ -62,11 +64,13 @@ def build_definitions(
                 description="Sundays 03:00: retrain the lifter on the mocap under the data root (turn on in the UI).",
             ),
         ],
+        sensors=[capture_inbox],
         resources={
             "io_manager": ParquetIOManagerFactory(base_path=root),
             "checkpoint_io_manager": CheckpointIOManagerFactory(base_path=root),
             "body_model": BodyModelResource(),
             "datasets": datasets or DatasetsResource(),
+            "torch_runtime": TorchResource(),
         },
     )
 

@@ -19,7 +19,7 @@ import pandas as pd
 import threadpoolctl
 import torch
 
-from assets.calibration import INTRINSICS_CONFIG
+from assets.settings import IntrinsicsSettings
 from humancal.calibration import ExtrinsicsConfig, LiftedPoses, estimate_extrinsics, estimate_intrinsics
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
 from pipelines.definitions import artifacts_root
@@ -58,7 +58,7 @@ def main() -> None:
         lifted = LiftedPoses.from_lifter(lifted)
         sizes = list(zip(views.sort_values("view")["width_px"], views.sort_values("view")["height_px"]))
         with threadpoolctl.threadpool_limits(1):
-            t_int, s_int, intrinsics = _time(lambda: estimate_intrinsics(dense, lifted, sizes, INTRINSICS_CONFIG),
+            t_int, s_int, intrinsics = _time(lambda: estimate_intrinsics(dense, lifted, sizes, IntrinsicsSettings().to_library()),
                                              args.repeats)
             t_ext, s_ext, _ = _time(lambda: estimate_extrinsics(dense, lifted, intrinsics, ExtrinsicsConfig()),
                                     args.repeats)

@@ -1,0 +1,122 @@
+"""Per-stage settings as Dagster ``Config`` classes, shown and editable in the UI's launchpad.
+
+Each class mirrors one settings dataclass of the library field by field: the same names, the same defaults (taken
+from the dataclass itself, so they cannot drift) and the same descriptions (the dataclass docstring's
+``Attributes`` entries), with ``to_library()`` converting in one line. A pipeline may choose a different default
+for a field; those choices are listed in ``PIPELINE_DEFAULTS`` of each class and nowhere else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+from typing import Any, ClassVar, Literal
+
+import dagster as dg
+from pydantic import Field
+
+from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig
+
+__all__ = ["IntrinsicsSettings", "ExtrinsicsSettings", "attribute_docs", "library_field"]
+
+
+def attribute_docs(cls: type) -> dict[str, str]:
+    """The ``Attributes:`` entries of a Google-style class docstring, by attribute name.
+
+    An entry may name several attributes (``"plumb_top, plumb_bottom: ..."``); continuation lines are joined.
+    """
+    doc = inspect.getdoc(cls) or ""
+    section = doc.split("Attributes:", 1)[1] if "Attributes:" in doc else ""
+    entries: dict[str, str] = {}
+    names: list[str] = []
+    for line in section.splitlines():
+        if line and not line.startswith(" "):  # the next section
+            break
+        match = re.match(r"^ {4}([A-Za-z_][\w, ]*):\s*(.*)$", line)
+        if match:
+            names = [n.strip() for n in match.group(1).split(",")]
+            for name in names:
+                entries[name] = match.group(2).strip()
+        elif line.strip() and names:
+            for name in names:
+                entries[name] += " " + line.strip()
+    return entries
+
+
+def library_field(dataclass_type: type, name: str, default: Any = dataclasses.MISSING) -> Any:
+    """A pydantic field with the dataclass field's default (tuples as lists) and docstring description."""
+    if default is dataclasses.MISSING:
+        default = {f.name: f.default for f in dataclasses.fields(dataclass_type)}[name]
+    if isinstance(default, tuple):
+        default = list(default)
+    return Field(default=default, description=attribute_docs(dataclass_type)[name])
+
+
+def _to_library(settings: dg.Config, dataclass_type: type):
+    values = settings.model_dump()
+    types = {f.name: f.default for f in dataclasses.fields(dataclass_type)}
+    return dataclass_type(**{k: tuple(v) if isinstance(types[k], tuple) else v for k, v in values.items()})
+
+
+_I = IntrinsicsConfig
+
+
+class IntrinsicsSettings(dg.Config):
+    """Settings of the ``intrinsics`` asset (:class:`humancal.calibration.IntrinsicsConfig`)."""
+
+    PIPELINE_DEFAULTS: ClassVar[dict[str, Any]] = {"missing_upright": "defer"}
+    """A view without upright people is deferred to the multi-view focal recovery of the extrinsics step."""
+
+    upright_threshold: float = library_field(_I, "upright_threshold")
+    plumb_top: str = library_field(_I, "plumb_top")
+    plumb_bottom: str = library_field(_I, "plumb_bottom")
+    min_joint_score: float = library_field(_I, "min_joint_score")
+    min_line_length_px: float = library_field(_I, "min_line_length_px")
+    angle_threshold_deg: float = library_field(_I, "angle_threshold_deg")
+    ransac_iterations: int = library_field(_I, "ransac_iterations")
+    max_candidates: int = library_field(_I, "max_candidates")
+    square_pixels: bool = library_field(_I, "square_pixels")
+    focal_range_rel: list[float] = library_field(_I, "focal_range_rel")
+    max_focal_rel_uncertainty: float = library_field(_I, "max_focal_rel_uncertainty")
+    lean_std_deg: float = library_field(_I, "lean_std_deg")
+    height_rel_std: float = library_field(_I, "height_rel_std")
+    min_inliers: int = library_field(_I, "min_inliers")
+    missing_upright: Literal["raise", "defer"] = library_field(_I, "missing_upright", "defer")
+    seed: int = library_field(_I, "seed")
+
+    def to_library(self) -> IntrinsicsConfig:
+        """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""
+        return _to_library(self, IntrinsicsConfig)
+
+
+_E = ExtrinsicsConfig
+
+
+class ExtrinsicsSettings(dg.Config):
+    """Settings of the ``extrinsics`` asset (:class:`humancal.calibration.ExtrinsicsConfig`)."""
+
+    PIPELINE_DEFAULTS: ClassVar[dict[str, Any]] = {}
+
+    rotation_threshold_deg: float = library_field(_E, "rotation_threshold_deg")
+    max_pose_error_m: float = library_field(_E, "max_pose_error_m")
+    max_frames_per_pair: int = library_field(_E, "max_frames_per_pair")
+    max_pair_hypotheses: int = library_field(_E, "max_pair_hypotheses")
+    min_pair_support: int = library_field(_E, "min_pair_support")
+    linear_iterations: int = library_field(_E, "linear_iterations")
+    linear_max_rel_std: float = library_field(_E, "linear_max_rel_std")
+    single_view_min_rel_std: float = library_field(_E, "single_view_min_rel_std")
+    focal_range_rel: list[float] = library_field(_E, "focal_range_rel")
+    max_groups: int = library_field(_E, "max_groups")
+    shape_std_m: float = library_field(_E, "shape_std_m")
+    person_scale_std: float | None = library_field(_E, "person_scale_std")
+    bundle_iterations: int = library_field(_E, "bundle_iterations")
+    max_focal_rel_std: float = library_field(_E, "max_focal_rel_std")
+    square_pixels: bool = library_field(_E, "square_pixels")
+    align_floor: bool = library_field(_E, "align_floor")
+    upright_threshold: float = library_field(_E, "upright_threshold")
+    seed: int = library_field(_E, "seed")
+
+    def to_library(self) -> ExtrinsicsConfig:
+        """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""
+        return _to_library(self, ExtrinsicsConfig)
