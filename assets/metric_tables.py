@@ -12,6 +12,7 @@ from evaluation.lifter_metrics import lifter_metrics_table
 from evaluation.rig_plot import plot_rig_comparison
 from evaluation.sequence_metrics import sequence_metric_table
 from humancal.camera import cameras_from_table
+from humancal.tables import empty_table
 from resources.datasets import DatasetsResource
 
 
@@ -33,8 +34,12 @@ def metric_tables(
     spec = datasets.spec(context.partition_key)
     gt = cameras_from_table(gt_cameras)
     estimated = cameras_from_table(extrinsics)
-    table = pd.concat(
-        [
+    # A user's capture may come without known cameras, identities or 3D poses: only the rows its ground truth
+    # supports (camera errors need known cameras; everything else needs identities and poses too).
+    identified = bool(gt) and len(gt_associations) > 0 and len(gt_poses3d) > 0
+    parts = []
+    if identified:
+        parts += [
             sequence_metric_table(
                 spec,
                 gt_camera_triangulation=gt_camera_triangulation,
@@ -45,17 +50,22 @@ def metric_tables(
             ),
             lifter_metrics_table(spec.dataset, spec.sequence, detections, gt_associations, gt_poses3d, gt_cameras,
                                  gt_people),
-            camera_metrics_table(spec.dataset, spec.sequence, estimated, gt, raw_detections, gt_associations),
-        ],
-        ignore_index=True,
-    )
+        ]
+    if gt:
+        parts.append(camera_metrics_table(spec.dataset, spec.sequence, estimated, gt,
+                                          raw_detections if identified else None, gt_associations if identified else None))
+    else:
+        context.log.info(f"{spec.key}: no known cameras: no metric rows (the calibrated cameras are in extrinsics)")
+    table = pd.concat(parts, ignore_index=True) if parts else empty_table("metrics")
     headline = table[table["view"].isna() & ~table["metric"].str.contains("/")].drop(columns="view")
     context.log.info(f"{spec.key}: {len(table)} metric rows ({len(headline)} headline)")
-    with tempfile.TemporaryDirectory() as tmp:
-        png = plot_rig_comparison(estimated, gt, raw_detections, gt_associations, Path(tmp) / "rigs.png",
-                                  title=f"{spec.key}: initial cameras (aligned) and ground truth")
-        rigs = png_metadata(png, "camera rigs")
+    pictures = {}
+    if gt:
+        with tempfile.TemporaryDirectory() as tmp:
+            png = plot_rig_comparison(estimated, gt, raw_detections, gt_associations, Path(tmp) / "rigs.png",
+                                      title=f"{spec.key}: initial cameras (aligned) and ground truth")
+            pictures["rigs"] = png_metadata(png, "camera rigs")
     return table_output(
-        table, "metrics", rows=len(table), rigs=rigs,
+        table, "metrics", rows=len(table), **pictures,
         summary=dg.MetadataValue.md(headline.to_markdown(index=False, floatfmt=".2f")),
     )

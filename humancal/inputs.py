@@ -64,6 +64,8 @@ def load_sequence_inputs(spec: SequenceSpec, body_model: Callable[[], object], d
         return _load_synthetic(spec, body_model())
     if spec.kind == "shelf":
         return _load_shelf(spec, _data_folder(spec, data_root))
+    if spec.kind == "capture":
+        return _load_capture(spec)
     raise ValueError(f"sequence {spec.key}: no loader for dataset kind {spec.kind!r}")
 
 
@@ -82,6 +84,29 @@ def _load_synthetic(spec: SequenceSpec, body) -> SequenceInputs:
         gt_poses3d=scene.poses3d,
         gt_associations=scene.associations,
         gt_people=scene.people,
+    )
+
+
+def _load_capture(spec: SequenceSpec) -> SequenceInputs:
+    """A user's capture: detections and views; known cameras (when given) as the ground-truth cameras; no other
+    ground truth."""
+    from humancal.captures import CaptureConfig, load_capture
+
+    base = Path(spec.source).parent if spec.source else None
+    try:
+        config = CaptureConfig.from_options(spec.options, base)
+    except ValueError as err:
+        raise ValueError(f"sequence {spec.key} ({spec.source}): {err}") from None
+    capture = load_capture(config, spec.sequence)
+    for line in capture.summary.lines():
+        log.info("%s:%s", spec.key, line)
+    return SequenceInputs(
+        detections=capture.detections,
+        views=capture.views,
+        gt_cameras=capture.gt_cameras,
+        gt_poses3d=empty_table("poses3d"),
+        gt_associations=empty_table("associations"),
+        gt_people=empty_table("people"),
     )
 
 

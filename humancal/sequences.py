@@ -12,14 +12,22 @@ partition key of every per-sequence artifact. The config is YAML::
         kind: shelf                # read from <data root>/shelf_4dassoc
         sequences:
           test: {}
+      mycapture:
+        kind: capture              # a user's detections (humancal.captures): paths absolute or relative
+        sequences:                 # to this file's folder; needs no data root
+          capture: {format: openpose, views: [cam1/, cam2/], image_size: [1920, 1080]}
 
 The default config ships with the package (``pipelines/datasets.yaml``); ``HUMANCAL_DATASETS``
-points at another file.
+points at another file. Users' own captures go to the **user datasets file**
+``<state dir>/datasets.yaml`` (written by ``humancal add`` and the inbox sensor), which is merged with it
+whenever it exists: its datasets are added to those of the main file, and a dataset name defined in both files
+is an error (never a silent override).
 """
 
 from __future__ import annotations
 
 import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,13 +38,15 @@ __all__ = [
     "SequenceSpec",
     "DatasetsConfigError",
     "load_datasets_config",
+    "user_config_path",
+    "add_user_sequence",
     "available_sequences",
     "partition_key",
     "parse_partition_key",
 ]
 
 DATASETS_ENV = "HUMANCAL_DATASETS"
-KINDS = ("synthetic", "shelf")
+KINDS = ("synthetic", "shelf", "capture")
 """Dataset kinds humancal knows how to load."""
 
 _KIND_DATA_FOLDER = {"shelf": "shelf_4dassoc"}
@@ -56,12 +66,14 @@ class SequenceSpec:
         sequence: sequence name (second half).
         kind: loader kind, one of ``KINDS``.
         options: loader options from the config (e.g. ``preset``, ``seed`` for synthetic data).
+        source: the datasets file it comes from (relative paths of a capture are relative to its folder).
     """
 
     dataset: str
     sequence: str
     kind: str
     options: dict[str, Any] = field(default_factory=dict)
+    source: str | None = None
 
     @property
     def key(self) -> str:
@@ -82,14 +94,39 @@ def default_config_path() -> Path:
     return Path(__file__).resolve().parent.parent / "pipelines" / "datasets.yaml"
 
 
-def load_datasets_config(path: Path | None = None) -> dict[str, SequenceSpec]:
-    """Parse the datasets config into specs keyed by partition key.
+def user_config_path() -> Path:
+    """The user datasets file, ``<state dir>/datasets.yaml`` (it may not exist)."""
+    from humancal.settings import state_dir
+
+    return state_dir() / "datasets.yaml"
+
+
+def load_datasets_config(path: Path | None = None, user_path: Path | None = None) -> dict[str, SequenceSpec]:
+    """Parse the datasets config, merged with the user datasets file, into specs keyed by partition key.
+
+    Args:
+        path: the main config (default :func:`default_config_path`).
+        user_path: the user datasets file (default :func:`user_config_path`); merged when it exists.
 
     Raises:
-        DatasetsConfigError: the file is missing or not valid YAML, or a field is malformed; the
-            message names the file and the field.
+        DatasetsConfigError: a file is missing (the main one) or not valid YAML, a field is malformed, or a
+            dataset is defined in both files; the message names the file and the field.
     """
-    path = Path(path) if path is not None else default_config_path()
+    specs = _load_one(Path(path) if path is not None else default_config_path())
+    user = Path(user_path) if user_path is not None else user_config_path()
+    if user.is_file():
+        main_datasets = {s.dataset: s.source for s in specs.values()}
+        for key, spec in _load_one(user).items():
+            if spec.dataset in main_datasets:
+                raise DatasetsConfigError(
+                    f"{user}: datasets.{spec.dataset}: the name is taken by {main_datasets[spec.dataset]}; "
+                    "rename it in the user datasets file"
+                )
+            specs[key] = spec
+    return specs
+
+
+def _read_raw(path: Path) -> dict:
     try:
         raw = yaml.safe_load(path.read_text())
     except FileNotFoundError:
@@ -98,6 +135,11 @@ def load_datasets_config(path: Path | None = None) -> dict[str, SequenceSpec]:
         raise DatasetsConfigError(f"{path}: not valid YAML: {err}".replace("\n", " ")) from None
     if not isinstance(raw, dict) or not isinstance(raw.get("datasets"), dict):
         raise DatasetsConfigError(f"{path}: expected a mapping with a 'datasets' mapping at the top")
+    return raw
+
+
+def _load_one(path: Path) -> dict[str, SequenceSpec]:
+    raw = _read_raw(path)
     specs: dict[str, SequenceSpec] = {}
     for dataset, body in raw["datasets"].items():
         where = f"{path}: datasets.{dataset}"
@@ -115,13 +157,16 @@ def load_datasets_config(path: Path | None = None) -> dict[str, SequenceSpec]:
             options = {} if options is None else options
             if not isinstance(options, dict):
                 raise DatasetsConfigError(f"{where}.sequences.{name}: expected a mapping of options, got {options!r}")
-            spec = SequenceSpec(str(dataset), str(name), kind, dict(options))
+            if _SEPARATOR in str(name):
+                raise DatasetsConfigError(f"{where}.sequences.{name}: sequence names may not contain '{_SEPARATOR}'")
+            spec = SequenceSpec(str(dataset), str(name), kind, dict(options), str(path))
             specs[spec.key] = spec
     return specs
 
 
 def available_sequences(specs: dict[str, SequenceSpec], data_root: Path | None) -> list[SequenceSpec]:
-    """The sequences that can be loaded here: all synthetic ones, and those whose data folder exists."""
+    """The sequences that can be loaded here: synthetic ones and users' captures always, others when their data
+    folder exists under the data root."""
     out = []
     for spec in specs.values():
         folder = spec.data_folder
@@ -150,3 +195,57 @@ def parse_partition_key(key: str, specs: dict[str, SequenceSpec]) -> SequenceSpe
             raise DatasetsConfigError(f"partition key {key!r}: unknown dataset {dataset!r}; known datasets: {known}")
         raise DatasetsConfigError(f"partition key {key!r}: unknown sequence; known: {sorted(specs)}")
     return specs[key]
+
+
+def add_user_sequence(dataset: str, sequence: str, kind: str, options: dict[str, Any], user_path: Path | None = None,
+                      main_path: Path | None = None) -> SequenceSpec:
+    """Add one sequence to the user datasets file (created when missing), atomically.
+
+    Args:
+        dataset, sequence: the partition key's halves (letters, digits, ``-``, ``_``; no ``__``).
+        kind: one of ``KINDS``.
+        options: the sequence's options (written as given).
+        user_path: the user datasets file (default :func:`user_config_path`).
+        main_path: the main config (default :func:`default_config_path`), checked for a name clash.
+
+    Returns:
+        The new spec.
+
+    Raises:
+        DatasetsConfigError: a bad name, the dataset is defined in the main config or with another kind, or the
+            partition exists; the file is then left as it was.
+    """
+    user = Path(user_path) if user_path is not None else user_config_path()
+    for what, name in (("dataset", dataset), ("sequence", sequence)):
+        if not name or _SEPARATOR in name or not all(c.isalnum() or c in "-_" for c in name):
+            raise DatasetsConfigError(
+                f"{what} name {name!r}: expected letters, digits, '-' or '_' (not '{_SEPARATOR}')"
+            )
+    main = _load_one(Path(main_path) if main_path is not None else default_config_path())
+    owner = next((s.source for s in main.values() if s.dataset == dataset), None)
+    if owner is not None:
+        raise DatasetsConfigError(f"dataset {dataset!r} is defined in {owner}; choose another name")
+    raw = {"datasets": {}}
+    if user.is_file():
+        _load_one(user)  # a malformed user file is reported before anything is written
+        raw = _read_raw(user)
+    body = raw["datasets"].setdefault(dataset, {"kind": kind, "sequences": {}})
+    if body.get("kind") != kind:
+        raise DatasetsConfigError(f"{user}: datasets.{dataset} has kind {body.get('kind')!r}, not {kind!r}")
+    if sequence in (body.get("sequences") or {}):
+        raise DatasetsConfigError(
+            f"{user}: partition {partition_key(dataset, sequence)} exists; choose another name or remove it there"
+        )
+    body.setdefault("sequences", {})[sequence] = options
+    user.parent.mkdir(parents=True, exist_ok=True)
+    text = "# Users' own captures (humancal add, the inbox sensor); merged with the packaged datasets config.\n"
+    text += yaml.safe_dump(raw, sort_keys=False)
+    fd, tmp = tempfile.mkstemp(prefix=f".{user.name}.", suffix=".tmp", dir=user.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, user)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return SequenceSpec(dataset, sequence, kind, dict(options), str(user))

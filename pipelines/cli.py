@@ -4,6 +4,7 @@
     humancal update [--partition P ...]  materialize only what is missing or stale
     humancal report [--partition P] [--format md|csv]   (P may also be cmu_mocap__held_out_02_14)
     humancal export detections|cameras --partition P --format F --out PATH
+    humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/capture_cli.py)
     humancal ui                          the Dagster UI on 127.0.0.1
 
 All commands share one persistent Dagster instance in ``<state dir>/dagster_home`` (telemetry off),
@@ -269,6 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="export the dataset's ground-truth cameras (gt_cameras) instead of the estimated ones")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_export)
+    from pipelines.capture_cli import add_parser as add_capture_command  # humancal add NAME --openpose ...
+    add_capture_command(sub)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
     p.add_argument("--port", type=int, default=3000)
     p.set_defaults(func=cmd_ui)

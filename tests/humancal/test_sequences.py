@@ -26,7 +26,7 @@ def test_available_sequences_need_their_data_folder(tmp_path):
     "text, message",
     [
         ("datasets: [1, 2]", "expected a mapping with a 'datasets' mapping"),
-        ("datasets:\n  a: {kind: video, sequences: {x: {}}}", r"datasets.a.kind: expected one of \['synthetic', 'shelf'\]"),
+        ("datasets:\n  a: {kind: video, sequences: {x: {}}}", r"datasets.a.kind: expected one of \['synthetic', 'shelf', 'capture'\]"),
         ("datasets:\n  a: {kind: synthetic, sequences: {}}", "datasets.a.sequences: expected a non-empty mapping"),
         ("datasets:\n  a__b: {kind: synthetic, sequences: {x: {}}}", "dataset names may not contain '__'"),
         ("datasets: {a: [", "not valid YAML"),

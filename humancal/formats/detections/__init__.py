@@ -27,13 +27,14 @@ from humancal.formats.detections.openpose import OPENPOSE_SKELETONS, read_openpo
 from humancal.formats.detections.table import (
     IMAGE_SIZE_ATTR,
     PLACEHOLDERS_ATTR,
+    SKELETON_ATTR,
     detections_from_arrays,
     detections_to_arrays,
     image_sizes_by_view,
     sort_detections,
 )
 from humancal.formats.errors import FormatError
-from humancal.formats.skeletons import Skeleton
+from humancal.formats.skeletons import Skeleton, get_skeleton
 from humancal.tables import empty_table
 
 __all__ = [
@@ -114,6 +115,7 @@ def read_detections(
             )
             parts.append(part)
             placeholders[v] = part.attrs.get(PLACEHOLDERS_ATTR, {}).get(v, 0)
+            skeleton = part.attrs.get(SKELETON_ATTR) or skeleton
             if size is not None:
                 from_files[v] = size
         non_empty = [p for p in parts if len(p)]
@@ -132,4 +134,6 @@ def read_detections(
             raise FormatError(path, "image size", expected, "none")
     table.attrs[IMAGE_SIZE_ATTR] = sizes
     table.attrs[PLACEHOLDERS_ATTR] = placeholders
+    if format == "coco":
+        table.attrs[SKELETON_ATTR] = None if skeleton is None else get_skeleton(skeleton).name
     return table

@@ -36,7 +36,7 @@ import pandas as pd
 
 from humancal.formats._io import load_json
 from humancal.formats.detections._keypoints import checked_keypoints, skeleton_of_length
-from humancal.formats.detections.table import PLACEHOLDERS_ATTR, detections_from_arrays
+from humancal.formats.detections.table import PLACEHOLDERS_ATTR, SKELETON_ATTR, detections_from_arrays
 from humancal.formats.errors import FormatError, missing_field
 from humancal.formats.joint_mapping import to_canonical
 from humancal.formats.skeletons import Skeleton, get_skeleton
@@ -122,6 +122,7 @@ def read_coco_keypoints(
     if placeholders:
         logger.info("%s: skipped %d placeholder entries without keypoints", path, placeholders)
     table.attrs[PLACEHOLDERS_ATTR] = {view: placeholders}
+    table.attrs[SKELETON_ATTR] = None if skel is None else skel.name
     return table, _image_size(images, path)
 
 

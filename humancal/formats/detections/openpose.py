@@ -38,7 +38,12 @@ import pandas as pd
 
 from humancal.formats._io import atomic_write_text, load_json
 from humancal.formats.detections._keypoints import checked_keypoints, skeleton_of_length
-from humancal.formats.detections.table import PLACEHOLDERS_ATTR, detections_from_arrays, detections_to_arrays
+from humancal.formats.detections.table import (
+    PLACEHOLDERS_ATTR,
+    SKELETON_ATTR,
+    detections_from_arrays,
+    detections_to_arrays,
+)
 from humancal.formats.errors import FormatError
 from humancal.formats.joint_mapping import from_canonical, to_canonical
 from humancal.formats.skeletons import Skeleton, get_skeleton
@@ -207,6 +212,7 @@ def read_openpose(
             logger.info("%s: skipped %d placeholder person entries without keypoints", folders[v], count)
     table = detections_from_arrays(images, sequence, source=f"OpenPose folders {[str(f) for f in folders.values()]}")
     table.attrs[PLACEHOLDERS_ATTR] = placeholders
+    table.attrs[SKELETON_ATTR] = None if skel is None else skel.name
     return table
 
 

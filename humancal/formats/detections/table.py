@@ -20,6 +20,7 @@ from humancal.tables import empty_table, validate_table
 __all__ = [
     "IMAGE_SIZE_ATTR",
     "PLACEHOLDERS_ATTR",
+    "SKELETON_ATTR",
     "ImageArrays",
     "detections_from_arrays",
     "detections_to_arrays",
@@ -35,6 +36,9 @@ IMAGE_SIZE_ATTR = "image_size_px"
 PLACEHOLDERS_ATTR = "skipped_placeholders"
 """Key of ``DataFrame.attrs`` under which readers leave ``{view: number of person entries skipped}`` (entries with
 an empty keypoint list, which some trackers write as placeholders)."""
+
+SKELETON_ATTR = "skeleton"
+"""Key of ``DataFrame.attrs`` under which readers leave the name of the skeleton they read (``None``: no people)."""
 
 ImageArrays = tuple[np.ndarray, np.ndarray, np.ndarray]
 """(det_ids (P,), keypoints (P, 23, 2) pixels with NaN where absent, scores (P, 23) with 0 where absent)."""

@@ -1,0 +1,96 @@
+"""``humancal add``: register a user's own capture (detector output per view) as a partition.
+
+    humancal add NAME --openpose DIR [DIR ...] --image-size WxH [WxH ...] [--skeleton S]
+                      [--cameras FILE [--cameras-format F]] [--fps FPS] [--sequence SEQ]
+    humancal add NAME --coco FILE [FILE ...] --image-size WxH [...]
+
+Everything is checked first: every file is read once, and an error names the file and the field; nothing is
+written then. On success the capture is added to the user datasets file (``<state dir>/datasets.yaml``, written
+atomically) and the partition ``NAME__SEQ`` is registered; ``humancal update --partition NAME__SEQ`` calibrates it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+DEFAULT_SEQUENCE = "capture"
+"""The sequence half of a capture's partition key unless ``--sequence`` names another."""
+
+
+def add_parser(subparsers) -> None:
+    """Add the ``add`` command to the CLI's subparsers."""
+    from humancal.formats import CAMERA_FORMATS
+    from humancal.formats.detections import COCO_SKELETONS, OPENPOSE_SKELETONS
+
+    p = subparsers.add_parser(
+        "add", help="register your own capture (OpenPose JSON folders or COCO keypoint files, one per view)",
+        description="Check and register a capture: per view, an OpenPose --write_json folder or a COCO-style keypoint "
+                    "JSON file (AlphaPose, MMPose/RTMPose). Writes the user datasets file and registers the partition "
+                    "NAME__SEQUENCE.",
+    )
+    p.add_argument("name", help="dataset name (letters, digits, '-', '_'), the first half of the partition key")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--openpose", nargs="+", metavar="DIR", type=Path, help="one OpenPose JSON folder per view, in view order")
+    source.add_argument("--coco", nargs="+", metavar="FILE", type=Path, help="one COCO-style keypoint JSON file per view")
+    p.add_argument("--image-size", nargs="+", required=True, metavar="WxH",
+                   help="image size in pixels, e.g. 1920x1080: one for all views or one per view")
+    p.add_argument("--skeleton", choices=[*OPENPOSE_SKELETONS, *COCO_SKELETONS],
+                   help="the detector's keypoint format (required for 25-point OpenPose output: body25 or body25b)")
+    p.add_argument("--cameras", type=Path, metavar="FILE",
+                   help="known cameras, one per view in view order (evaluation only: never used by the method)")
+    p.add_argument("--cameras-format", choices=CAMERA_FORMATS, help="format of --cameras (default: from the file)")
+    p.add_argument("--fps", type=float, help="frames per second")
+    p.add_argument("--sequence", default=DEFAULT_SEQUENCE, help=f"the second half of the partition key (default {DEFAULT_SEQUENCE})")
+    p.set_defaults(func=cmd_add)
+
+
+def cmd_add(args: argparse.Namespace) -> int:
+    """Validate the capture, write it into the user datasets file, register its partition, print a summary."""
+    from humancal.captures import CaptureConfig, load_capture, parse_image_size
+    from humancal.sequences import (
+        DatasetsConfigError,
+        add_user_sequence,
+        load_datasets_config,
+        partition_key,
+        user_config_path,
+    )
+
+    views = [p.expanduser().resolve() for p in (args.openpose or args.coco)]
+    sizes = [parse_image_size(s, "--image-size") for s in args.image_size]
+    if len(sizes) == 1:
+        sizes = sizes * len(views)
+    elif len(sizes) != len(views):
+        raise ValueError(f"--image-size: expected one size or one per view ({len(views)}), got {len(sizes)}")
+    if args.cameras_format and not args.cameras:
+        raise ValueError("--cameras-format: given without --cameras")
+    config = CaptureConfig(
+        format="openpose" if args.openpose else "coco",
+        views=tuple(views),
+        image_sizes_px=tuple(sizes),
+        skeleton=args.skeleton,
+        cameras=args.cameras.expanduser().resolve() if args.cameras else None,
+        cameras_format=args.cameras_format,
+        fps=args.fps,
+    )
+    key = partition_key(args.name, args.sequence)
+    if key in load_datasets_config():  # the cheap check first; add_user_sequence checks again before writing
+        raise DatasetsConfigError(f"partition {key} exists; choose another NAME or --sequence")
+    capture = load_capture(config, args.sequence)
+    spec = add_user_sequence(args.name, args.sequence, "capture", config.to_options())
+    register_capture_partition(spec.key)
+    print(f"registered {spec.key} in {user_config_path()}:")
+    print("\n".join(capture.summary.lines()))
+    print(f"next: humancal update --partition {spec.key}\n"
+          f"      humancal export cameras --partition {spec.key} --cameras-asset extrinsics --format pose2sim --out cameras.toml")
+    return 0
+
+
+def register_capture_partition(key: str) -> None:
+    """Add ``key`` to the sequences partitions of the CLI's Dagster instance."""
+    from pipelines.cli import _instance
+    from pipelines.partitions import SEQUENCES
+
+    instance = _instance()
+    if key not in set(instance.get_dynamic_partitions(SEQUENCES.name)):
+        instance.add_dynamic_partitions(SEQUENCES.name, [key])
