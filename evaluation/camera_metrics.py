@@ -23,9 +23,11 @@ import numpy as np
 import pandas as pd
 
 from evaluation.protocols import MetricRow, metrics_table
+from humancal.associations import Associations
 from humancal.calibration.alignment import Similarity, align_rig
 from humancal.camera import Camera
 from humancal.detections import detections_to_dense
+from humancal.geometry.rotations import rotation_distance_deg
 from humancal.geometry.triangulation import reprojection_errors_px, triangulate_dlt
 
 __all__ = ["CameraErrors", "camera_errors", "reprojection_errors_per_view", "camera_metrics", "camera_metrics_table"]
@@ -35,10 +37,6 @@ METHOD = "init"
 
 class CameraErrors(dict):
     """Per-view arrays ``focal_error_pct``, ``position_error_mm``, ``angle_error_deg`` and the ``alignment``."""
-
-
-def _angle_deg(R: np.ndarray) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
 
 
 def camera_errors(estimated: list[Camera], ground_truth: list[Camera]) -> CameraErrors:
@@ -55,7 +53,8 @@ def camera_errors(estimated: list[Camera], ground_truth: list[Camera]) -> Camera
     f_gt = np.array([np.sqrt(c.K[0, 0] * c.K[1, 1]) for c in ground_truth])
     aligned = [sim.apply_to_camera(c) for c in estimated]
     pos = np.array([1000.0 * np.linalg.norm(a.center_world_m - g.center_world_m) for a, g in zip(aligned, ground_truth)])
-    ang = np.array([_angle_deg(a.R_cam_from_world @ g.R_cam_from_world.T) for a, g in zip(aligned, ground_truth)])
+    ang = rotation_distance_deg(np.stack([a.R_cam_from_world for a in aligned]),
+                                np.stack([g.R_cam_from_world for g in ground_truth]))
     return CameraErrors(focal_error_pct=100.0 * np.abs(f_est - f_gt) / f_gt, position_error_mm=pos,
                         angle_error_deg=ang, alignment=sim)
 
@@ -75,8 +74,7 @@ def reprojection_errors_per_view(
         (V,) mean pixel error over the detected keypoints of associated detections (NaN for a view without any).
     """
     dense = detections_to_dense(detections)
-    ids = associations.set_index(["frame", "view", "det_id"])["person_id"]
-    person = ids.reindex(pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])).fillna(-1).to_numpy(int)
+    person = Associations.from_table(associations).person_of_detections(dense)
     keep = person >= 0
     V = len(cameras)
     keys, inverse = np.unique(np.c_[dense.frame[keep], person[keep]], axis=0, return_inverse=True)

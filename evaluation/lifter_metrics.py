@@ -47,9 +47,10 @@ import pandas as pd
 
 from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm
 from evaluation.protocols import MetricRow, metrics_table
+from humancal.associations import Associations
 from humancal.camera import cameras_from_table
 from humancal.keypoints import CANONICAL_JOINTS
-from humancal.lifter import ROOT_JOINTS, LiftedPoses, height_from_pose_m, lifted_from_table, root_relative
+from humancal.lifter import ROOT_JOINTS, height_from_pose_m, lifted_from_table, root_relative
 from humancal.poses import poses_to_dense
 
 __all__ = [
@@ -148,11 +149,6 @@ class LifterComparison:
         return len(self.view)
 
 
-def _subset(lifted: LiftedPoses, keep: np.ndarray) -> LiftedPoses:
-    return LiftedPoses(lifted.joints_cam_m[keep], lifted.height_m[keep], lifted.upright_score[keep],
-                       lifted.valid[keep], lifted.box_centre_px[keep], lifted.frame)
-
-
 def compare_lifted_to_gt(
     lifted_detections: pd.DataFrame,
     associations: pd.DataFrame,
@@ -176,9 +172,7 @@ def compare_lifted_to_gt(
         ValueError: an evaluated detection's view has no ground-truth camera.
     """
     dense, lifted = lifted_from_table(lifted_detections)
-    ids = associations.set_index(["frame", "view", "det_id"])["person_id"]
-    keys = pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])
-    person = ids.reindex(keys).fillna(-1).to_numpy(np.int64)
+    person = Associations.from_table(associations).person_of_detections(dense)
     g = poses_to_dense(gt_poses3d, CANONICAL_JOINTS)
     gt_row = {(f, p): n for n, (f, p) in enumerate(zip(g.frame, g.person_id))}
     row = np.array([gt_row.get((f, p), -1) for f, p in zip(dense.frame, person)], dtype=np.int64)
@@ -191,7 +185,7 @@ def compare_lifted_to_gt(
         raise ValueError(f"lifter metrics: detections of view {int(view.max())} but only {len(cameras)} cameras")
     K = np.stack([c.K for c in cameras])[view] if len(view) else np.zeros((0, 3, 3))
     R = np.stack([c.R_cam_from_world for c in cameras])[view] if len(view) else np.zeros((0, 3, 3))
-    lifted_cam = root_relative(_subset(lifted, keep).in_camera_frame(K).joints_cam_m)
+    lifted_cam = root_relative(lifted.subset(keep).in_camera_frame(K).joints_cam_m)
     gt_cam = np.einsum("nij,nkj->nki", R, root_relative(g.joints_world_m[row]))  # translation cancels
     compared = g.valid[row] & np.isfinite(lifted_cam).all(-1)
 

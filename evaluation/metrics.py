@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from humancal.geometry.alignment import align_points
+
 __all__ = ["joint_errors_mm", "mpjpe_mm", "pa_mpjpe_mm", "pcp_correct", "similarity_align"]
 
 
@@ -43,13 +45,7 @@ def similarity_align(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     Returns:
         (J, 3) aligned source points.
     """
-    mu_s, mu_t = source.mean(0), target.mean(0)
-    s0, t0 = source - mu_s, target - mu_t
-    U, S, Vt = np.linalg.svd(t0.T @ s0)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    R = U @ D @ Vt
-    scale = np.trace(np.diag(S) @ D) / max((s0**2).sum(), 1e-12)
-    return scale * s0 @ R.T + mu_t
+    return align_points(source, target)
 
 
 def pa_mpjpe_mm(pred_m: np.ndarray, gt_m: np.ndarray, valid: np.ndarray | None = None) -> float:
@@ -62,14 +58,14 @@ def pa_mpjpe_mm(pred_m: np.ndarray, gt_m: np.ndarray, valid: np.ndarray | None =
     Returns:
         millimetres (NaN when no pose qualifies).
     """
-    pred_m, gt_m = np.asarray(pred_m), np.asarray(gt_m)
+    pred_m, gt_m = np.asarray(pred_m, dtype=np.float64), np.asarray(gt_m, dtype=np.float64)
     finite = np.isfinite(pred_m).all(-1) & np.isfinite(gt_m).all(-1)
     mask = finite if valid is None else (finite & np.asarray(valid, bool))
-    errors = []
-    for p, g, m in zip(pred_m, gt_m, mask):
-        if m.sum() >= 3:
-            errors.append(joint_errors_mm(similarity_align(p[m], g[m]), g[m]))
-    return float(np.concatenate(errors).mean()) if errors else float("nan")
+    enough = mask.sum(-1) >= 3
+    if not enough.any():
+        return float("nan")
+    aligned = align_points(pred_m[enough], gt_m[enough], mask[enough].astype(np.float64))
+    return float(joint_errors_mm(aligned, gt_m[enough])[mask[enough]].mean())
 
 
 def pcp_correct(pred_m: np.ndarray, gt_m: np.ndarray, limbs: list[tuple[int, int]], alpha: float = 0.5) -> np.ndarray:

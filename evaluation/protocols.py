@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm, pcp_correct
+from humancal.associations import Associations
 from humancal.camera import Camera
 from humancal.detections import detections_to_dense
 from humancal.formats import SKELETONS, from_canonical
@@ -123,8 +124,7 @@ def evaluate_reprojection(
     """
     dense = detections_to_dense(detections)
     p = poses_to_dense(poses, CANONICAL_JOINTS)
-    ids = associations.set_index(["frame", "view", "det_id"])["person_id"]
-    person = ids.reindex(pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])).fillna(-1).to_numpy(np.int64)
+    person = Associations.from_table(associations).person_of_detections(dense)
     pose_row = {(f, i): n for n, (f, i) in enumerate(zip(p.frame, p.person_id))}
     match = np.array([pose_row.get((f, i), -1) for f, i in zip(dense.frame, person)], dtype=np.int64)
     errors = np.full(dense.scores.shape, np.nan)

@@ -63,7 +63,7 @@ class Associations:
                 "is listed more than once"
             )
         object.__setattr__(self, "_sorted_keys", keys[order])
-        object.__setattr__(self, "_sorted_person", self.person_id[order])
+        object.__setattr__(self, "_order", order)
 
     def __len__(self) -> int:
         return int(len(self.frame))
@@ -95,14 +95,14 @@ class Associations:
                               "person_id": self.person_id})
         return validate_table(table, "associations")
 
-    def person_of(self, frame: np.ndarray, view: np.ndarray, det_id: np.ndarray) -> np.ndarray:
-        """The person of each given detection, ``-1`` for detections not listed (vectorized).
+    def row_of(self, frame: np.ndarray, view: np.ndarray, det_id: np.ndarray) -> np.ndarray:
+        """The row of each given detection in these arrays, ``-1`` for detections not listed (vectorized).
 
         Args:
-            frame, view, det_id: (D,) keys (e.g. the fields of :class:`~humancal.detections.DenseDetections`).
+            frame, view, det_id: (D,) keys.
 
         Returns:
-            (D,) int64 person ids.
+            (D,) int64 row indices.
         """
         frame, view, det_id = (np.asarray(a, dtype=np.int64).reshape(-1) for a in (frame, view, det_id))
         out = np.full(len(frame), -1, dtype=np.int64)
@@ -113,8 +113,24 @@ class Associations:
         codes = self._codes(frame[known], view[known], det_id[known])
         at = np.clip(np.searchsorted(self._sorted_keys, codes), 0, len(self) - 1)
         hit = self._sorted_keys[at] == codes
-        out[np.flatnonzero(known)[hit]] = self._sorted_person[at[hit]]
+        out[np.flatnonzero(known)[hit]] = self._order[at[hit]]
         return out
+
+    def person_of(self, frame: np.ndarray, view: np.ndarray, det_id: np.ndarray) -> np.ndarray:
+        """The person of each given detection, ``-1`` for detections not listed (vectorized).
+
+        Args:
+            frame, view, det_id: (D,) keys (e.g. the fields of :class:`~humancal.detections.DenseDetections`).
+
+        Returns:
+            (D,) int64 person ids.
+        """
+        row = self.row_of(frame, view, det_id)
+        return np.where(row >= 0, self.person_id[np.maximum(row, 0)] if len(self) else -1, -1)
+
+    def row_of_detections(self, detections) -> np.ndarray:
+        """:meth:`row_of` for every row of dense detections (anything with ``frame``, ``view``, ``det_id``)."""
+        return self.row_of(detections.frame, detections.view, detections.det_id)
 
     def person_of_detections(self, detections) -> np.ndarray:
         """:meth:`person_of` for every row of dense detections (anything with ``frame``, ``view``, ``det_id``)."""

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from humancal.associations import Associations
 from humancal.camera import Camera
 from humancal.detections import detections_to_dense
 from humancal.geometry.triangulation import triangulate_dlt
@@ -67,9 +68,7 @@ def triangulate_identified(
     n_views = len(cameras)
     if len(dense) and dense.view.max() >= n_views:
         raise ValueError(f"detections use view {int(dense.view.max())} but only {n_views} cameras were given")
-    ids = associations.set_index(["frame", "view", "det_id"])["person_id"]
-    index = pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])
-    person = ids.reindex(index).fillna(-1).to_numpy(dtype=np.int64)
+    person = Associations.from_table(associations).person_of_detections(dense)
     keep = person >= 0
     frame, view, person = dense.frame[keep], dense.view[keep], person[keep]
     kp, sc = dense.keypoints_px[keep], dense.scores[keep]

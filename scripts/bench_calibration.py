@@ -20,7 +20,7 @@ import threadpoolctl
 import torch
 
 from assets.settings import IntrinsicsSettings
-from humancal.calibration import ExtrinsicsConfig, LiftedPoses, estimate_extrinsics, estimate_intrinsics
+from humancal.calibration import ExtrinsicsConfig, estimate_extrinsics, estimate_intrinsics
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
 from pipelines.definitions import artifacts_root
 from resources.io_managers import partition_path
@@ -55,7 +55,6 @@ def main() -> None:
     for pk in partitions:
         table, views = _read("detections", pk), _read("views", pk)
         dense, lifted = lifted_from_table(table)
-        lifted = LiftedPoses.from_lifter(lifted)
         sizes = list(zip(views.sort_values("view")["width_px"], views.sort_values("view")["height_px"]))
         with threadpoolctl.threadpool_limits(1):
             t_int, s_int, intrinsics = _time(lambda: estimate_intrinsics(dense, lifted, sizes, IntrinsicsSettings().to_library()),

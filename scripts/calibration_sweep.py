@@ -3,7 +3,7 @@
 Each synthetic scene draws 2-8 people, 3-8 views (ring, or an arc for one scene in four), a focal range inside
 500-2500 px and 60-150 frames, with the generator's default detector noise. The lifted poses come from either
 
-* ``--lifted stand-in`` (default without ``--lifter``): the stand-in of :mod:`humancal.calibration.stand_in`
+* ``--lifted stand-in`` (default without ``--lifter``): the oracle of :mod:`evaluation.oracle`
   (ground truth with 50 mm joint noise, 4 cm height noise, 3 degree pose rotation noise, 1 % depth flips), or
 * ``--lifter CHECKPOINT`` (implies ``--lifted lifter``): the learned lifter of :mod:`humancal.lifter` applied to
   the 2D detections only, in its crop frames (no ground truth is used in the lifting).
@@ -49,16 +49,18 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from evaluation.camera_metrics import camera_errors, reprojection_errors_per_view  # noqa: E402
+from evaluation.oracle import stand_in_lifted_poses  # noqa: E402
+from humancal.associations import Associations  # noqa: E402
 from humancal.calibration import (  # noqa: E402
     CalibrationError,
+    ExtrinsicsConfig,
     IntrinsicsConfig,
-    LiftedPoses,
     estimate_extrinsics,
     estimate_intrinsics,
     plot_rigs,
-    stand_in_lifted_poses,
 )
 from humancal.detections import detections_to_dense  # noqa: E402
+from humancal.lifter import LiftedPoses  # noqa: E402
 
 PAPER_SHELF = {"focal_error_pct": 8.15, "position_error_mm": 605.88, "angle_error_deg": 9.72,
                "reprojection_error_px": 44.94}
@@ -89,7 +91,7 @@ def lift_with(lifter, detections_table: pd.DataFrame):
 
     t0 = time.perf_counter()
     dense = detections_to_dense(detections_table)
-    lifted = LiftedPoses.from_lifter(lift_detections(lifter, dense.keypoints_px, dense.scores))
+    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     return dense, lifted, time.perf_counter() - t0
 
 
@@ -113,18 +115,15 @@ def lift_quality(lifted: LiftedPoses, true_height_m: np.ndarray, config: Intrins
 def _scene_person_ids(scene, dense) -> np.ndarray:
     """Ground-truth person of every dense detection row of a synthetic scene (-1: false positive)."""
     d = scene.detector
-    truth = pd.DataFrame({"frame": d.frame, "view": d.view, "det_id": scene.det_id, "person_id": d.person_id})
-    truth = truth.set_index(["frame", "view", "det_id"])["person_id"]
-    index = pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])
-    return truth.reindex(index).fillna(-1).to_numpy(np.int64)
+    return Associations(d.frame, d.view, scene.det_id, d.person_id).person_of_detections(dense)
 
 
-def calibrate(detections, lifted, image_size_px, intrinsics_config):
+def calibrate(detections, lifted, image_size_px, intrinsics_config, extrinsics_config=None):
     """Intrinsics then extrinsics; returns (intrinsics, extrinsics, seconds per stage)."""
     t0 = time.perf_counter()
     intrinsics = estimate_intrinsics(detections, lifted, image_size_px, intrinsics_config)
     t1 = time.perf_counter()
-    extrinsics = estimate_extrinsics(detections, lifted, intrinsics)
+    extrinsics = estimate_extrinsics(detections, lifted, intrinsics, extrinsics_config)
     t2 = time.perf_counter()
     return intrinsics, extrinsics, {"intrinsics_s": t1 - t0, "extrinsics_s": t2 - t1}
 
@@ -152,8 +151,14 @@ def view_rows(name, intrinsics, extrinsics, gt_cameras, detections_table, associ
     return rows
 
 
-def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None, lifter=None) -> pd.DataFrame:
-    """The sweep over ``n`` seeded scenes; ``lifter`` (a loaded lifter) replaces the stand-in lifted poses."""
+def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None, lifter=None,
+                  variants: dict[str, ExtrinsicsConfig] | None = None) -> pd.DataFrame:
+    """The sweep over ``n`` seeded scenes; ``lifter`` (a loaded lifter) replaces the stand-in lifted poses.
+
+    ``variants`` (name -> extrinsics settings, default: the library's) are all run on every scene (generated and
+    lifted once); the rows carry the variant's name in column ``variant``.
+    """
+    variants = variants or {"default": ExtrinsicsConfig()}
     from humancal.body import BodyModel
     from humancal.synthetic import generate_scene
 
@@ -175,32 +180,35 @@ def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None
             truth = np.where(pid >= 0, np.asarray(scene.height_m)[np.maximum(pid, 0)], np.nan)
             extra.update(lift_quality(lifted, truth, config))
         sizes = [(c.width_px, c.height_px) for c in scene.rig]
-        try:
-            intr, extr, times = calibrate(detections, lifted, sizes, config)
-        except CalibrationError as exc:
-            print(f"scene {i}: CalibrationError: {exc}")
-            rows.append({"scene": f"sweep_{i}", "failed": str(exc)})
-            continue
-        r = view_rows(f"sweep_{i}", intr, extr, list(scene.rig), scene.detections, scene.associations,
-                      {**times, **extra})
-        for row in r:
-            row.update(people=cfg.num_people, frames=cfg.num_frames, rig=cfg.rig)
-        rows += r
-        df = pd.DataFrame(r)
-        print(f"scene {i:2d}: {cfg.num_people} people, {cfg.num_views} views ({cfg.rig}), {cfg.num_frames} frames, "
-              f"focal {cfg.focal_range_px[0]:.0f}-{cfg.focal_range_px[1]:.0f}: focal err max "
-              f"{df.focal_error_pct.max():.2f} %, angle max {df.angle_error_deg.max():.2f} deg, position max "
-              f"{df.position_error_mm.max():.0f} mm; {times['intrinsics_s']:.1f} + {times['extrinsics_s']:.1f} s")
-        if out is not None and i == 0:
+        for variant, extrinsics_config in variants.items():
+            try:
+                intr, extr, times = calibrate(detections, lifted, sizes, config, extrinsics_config)
+            except CalibrationError as exc:
+                print(f"scene {i} ({variant}): CalibrationError: {exc}")
+                rows.append({"scene": f"sweep_{i}", "variant": variant, "failed": str(exc)})
+                continue
+            r = view_rows(f"sweep_{i}", intr, extr, list(scene.rig), scene.detections, scene.associations,
+                          {**times, **extra})
+            for row in r:
+                row.update(people=cfg.num_people, frames=cfg.num_frames, rig=cfg.rig, variant=variant)
+            rows += r
+            df = pd.DataFrame(r)
+            print(f"scene {i:2d} ({variant}): {cfg.num_people} people, {cfg.num_views} views ({cfg.rig}), "
+                  f"{cfg.num_frames} frames, focal {cfg.focal_range_px[0]:.0f}-{cfg.focal_range_px[1]:.0f}: focal err "
+                  f"max {df.focal_error_pct.max():.2f} %, angle max {df.angle_error_deg.max():.2f} deg, position max "
+                  f"{df.position_error_mm.max():.0f} mm; {times['intrinsics_s']:.1f} + {times['extrinsics_s']:.1f} s",
+                  flush=True)
+        if out is not None and i == 0 and len(variants) == 1:
             plot_rigs(extr.cameras, list(scene.rig), extr.diagnostics.floor.floor_points_m,
                       out / "sweep_scene0_rigs.png", title="synthetic scene 0")
     return pd.DataFrame(rows)
 
 
-def run_shelf(config: IntrinsicsConfig, out: Path | None, lifter=None) -> pd.DataFrame | None:
+def run_shelf(config: IntrinsicsConfig, out: Path | None, lifter=None,
+              extrinsics_config: ExtrinsicsConfig | None = None) -> pd.DataFrame | None:
     """Shelf with the stand-in lifted poses, or with ``lifter`` (a loaded lifter) applied to the 2D detections."""
     from evaluation.detection_quality import evaluate_grouping
-    from humancal.calibration.stand_in import canonical_from_shelf15, stand_in_from_matches
+    from evaluation.oracle import canonical_from_shelf15, stand_in_from_matches
     from humancal.datasets.shelf import SHELF15_JOINTS, load_shelf
     from humancal.settings import DataRootError, dataset_dir
 
@@ -226,12 +234,12 @@ def run_shelf(config: IntrinsicsConfig, out: Path | None, lifter=None) -> pd.Dat
         detections, lifted = stand_in.detections, stand_in.lifted
     else:
         detections, lifted, extra["lift_s"] = lift_with(lifter, shelf.detections)
-        ids = matches.drop_duplicates(["frame", "view", "det_id"]).set_index(["frame", "view", "det_id"])["person_id"]
-        pid = ids.reindex(pd.MultiIndex.from_arrays([detections.frame, detections.view, detections.det_id]))
-        pid = pid.fillna(-1).to_numpy(np.int64)
+        pid = Associations.from_table(matches.drop_duplicates(["frame", "view", "det_id"])).person_of_detections(
+            detections)
         truth = np.where(pid >= 0, height[np.maximum(pid, 0)], np.nan)
         extra.update(lift_quality(lifted, truth, config))
-    intr, extr, times = calibrate(detections, lifted, shelf.image_size_px, config.replace(missing_upright="defer"))
+    intr, extr, times = calibrate(detections, lifted, shelf.image_size_px, config.replace(missing_upright="defer"),
+                                  extrinsics_config)
     assoc = matches[["sequence", "frame", "view", "det_id", "person_id"]]
     rows = view_rows("shelf", intr, extr, list(shelf.cameras), shelf.detections, assoc, {**times, **extra})
     if out is not None:
@@ -240,6 +248,23 @@ def run_shelf(config: IntrinsicsConfig, out: Path | None, lifter=None) -> pd.Dat
                   title=f"Shelf ({what} lifted poses)")
     print(extr.diagnostics.per_view.to_string())
     return pd.DataFrame(rows)
+
+
+def extrinsics_variants(spec: str) -> dict[str, ExtrinsicsConfig]:
+    """``"FIELD=V1,V2"`` -> {``"FIELD=V1"``: ExtrinsicsConfig(FIELD=V1), ...}, values typed like the default."""
+    name, _, values = spec.partition("=")
+    default = getattr(ExtrinsicsConfig(), name, _MISSING)
+    if default is _MISSING or not values:
+        raise SystemExit(f"--extrinsics {spec!r}: expected FIELD=V1[,V2...] with an ExtrinsicsConfig field")
+    kind = type(default) if default is not None else float
+    out = {}
+    for text in values.split(","):
+        value = None if text.lower() == "none" else kind(text)
+        out[f"{name}={text}"] = ExtrinsicsConfig(**{name: value})
+    return out
+
+
+_MISSING = object()
 
 
 def summary(df: pd.DataFrame) -> dict:
@@ -278,31 +303,40 @@ def main() -> None:
                         help="source of the lifted poses (default: 'lifter' when --lifter is given, else 'stand-in')")
     parser.add_argument("--lifter", type=Path, default=None, help="learned lifter checkpoint (humancal.lifter)")
     parser.add_argument("--out", type=Path, default=None, help="folder for per-view CSVs, summary JSON, plots")
+    parser.add_argument("--extrinsics", default=None, metavar="FIELD=V1[,V2...]",
+                        help="ExtrinsicsConfig field and values to compare on the synthetic scenes (e.g. "
+                             "shape_std_m=0.05,0.1,0.2; 'none' for None); with --shelf, a single value")
     args = parser.parse_args()
+    variants = extrinsics_variants(args.extrinsics) if args.extrinsics else None
+    if args.shelf and variants is not None and len(variants) > 1:
+        parser.error("--shelf measures one setting: defaults are chosen on the synthetic scenes, never on Shelf")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     mode = args.lifted or ("lifter" if args.lifter is not None else "stand-in")
     if mode == "lifter" and args.lifter is None:
         parser.error("--lifted lifter needs --lifter CHECKPOINT")
     lifter = None
     if mode == "lifter":
-        from humancal.lifter import load_lifter
+        from humancal.lifter import load_lifter, shipped_checkpoint
 
-        lifter = load_lifter(args.lifter)
+        lifter = load_lifter(shipped_checkpoint() if str(args.lifter) == "shipped" else args.lifter)
     # a view without upright people gets its focal from the other views (what the pipeline does): the learned
     # lifter's upright score is 0 for steeply pitched cameras and for walking people, so some views have none
     config = IntrinsicsConfig(plumb_top=args.plumb_top, missing_upright="defer")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
-    result = {"lifted": mode}
+    result = {"lifted": mode, "extrinsics": args.extrinsics or "default"}
     if lifter is not None:
         result["lifter_checkpoint"] = args.lifter.name
     if args.scenes > 0:
-        df = run_synthetic(args.scenes, args.seed, config, args.out, lifter)
-        result["synthetic"] = summary(df)
+        df = run_synthetic(args.scenes, args.seed, config, args.out, lifter, variants)
+        if variants is None or len(variants) == 1:
+            result["synthetic"] = summary(df)
+        else:
+            result["synthetic"] = {v: summary(df[df["variant"] == v]) for v in variants}
         if args.out is not None:
             df.to_csv(args.out / "synthetic_views.csv", index=False)
     if args.shelf:
-        shelf = run_shelf(config, args.out, lifter)
+        shelf = run_shelf(config, args.out, lifter, next(iter(variants.values())) if variants else None)
         if shelf is not None:
             means = {m: float(shelf[m].mean()) for m in PAPER_SHELF}
             quality = {c: float(shelf[c].iloc[0]) for c in shelf.columns

@@ -10,7 +10,7 @@ Example:
 See ``docs/calibration.md`` for the method, the failure modes and measured figures.
 """
 
-from humancal.calibration.alignment import Similarity, align_rig, umeyama
+from humancal.calibration.alignment import Similarity, align_rig
 from humancal.calibration.extrinsics import (
     ExtrinsicsConfig,
     ExtrinsicsDiagnostics,
@@ -20,7 +20,6 @@ from humancal.calibration.extrinsics import (
 from humancal.calibration.floor import FloorAlignment, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsConfig, IntrinsicsEstimate, estimate_intrinsics
 from humancal.calibration.plot import plot_rigs
-from humancal.calibration.stand_in import StandIn, stand_in_lifted_poses
 from humancal.calibration.tables import intrinsics_from_table, intrinsics_to_table
 from humancal.calibration.types import CalibrationError, LiftedPoses
 
@@ -37,11 +36,8 @@ __all__ = [
     "FloorAlignment",
     "align_to_floor",
     "Similarity",
-    "umeyama",
     "align_rig",
     "plot_rigs",
     "intrinsics_to_table",
     "intrinsics_from_table",
-    "StandIn",
-    "stand_in_lifted_poses",
 ]

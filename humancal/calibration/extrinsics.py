@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from humancal.calibration.floor import FloorAlignment, align_to_floor, standing_scores
+from humancal.calibration.floor import FloorAlignment, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.matching import groups_from_pairs
 from humancal.calibration.multiview_focal import bundle_adjust
@@ -36,6 +36,7 @@ from humancal.calibration.translations import resect_focal_translation, root_pos
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted
 from humancal.camera import Camera
 from humancal.detections import DenseDetections
+from humancal.lifter.pose_cues import standing_score
 
 __all__ = ["ExtrinsicsConfig", "ExtrinsicsDiagnostics", "ExtrinsicsEstimate", "estimate_extrinsics"]
 
@@ -67,7 +68,7 @@ class ExtrinsicsConfig:
         square_pixels: one focal per view (fx = fy).
         align_floor: move the result to the Z-up, floor z = 0 frame (else camera 0 stays the world).
         upright_threshold: groups whose reconstructed keypoints score at least this as standing
-            (:func:`~humancal.calibration.floor.standing_scores`) count as standing for the floor.
+            (:func:`~humancal.lifter.standing_score`) count as standing for the floor.
         seed: randomness of the subsampling.
     """
 
@@ -300,14 +301,14 @@ def estimate_extrinsics(
     # with the initial focal lengths, and once more with the linear solution if it moved them noticeably
     f_frame = f0.copy()
     lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
-    for attempt in range(2 if lifted.in_crop_frame else 1):
+    for attempt in range(2 if lifted.frame == "crop" else 1):
         clock = time.perf_counter()
         R, residual_deg, pairs, rows_a, rows_b = _rotations(detections, lifted_cam, V, rng, config)
         timings["rotations"] = timings.get("rotations", 0.0) + time.perf_counter() - clock
         clock = time.perf_counter()
         f, sol, roots = _linear(detections, lifted_cam, rows_a, rows_b, R, f0, prior_rel, pp, diag, config)
         timings["linear"] = timings.get("linear", 0.0) + time.perf_counter() - clock
-        if not lifted.in_crop_frame or np.max(np.abs(np.log(f / f_frame))) < 0.05 or attempt == 1:
+        if lifted.frame != "crop" or np.max(np.abs(np.log(f / f_frame))) < 0.05 or attempt == 1:
             break
         f_frame = f.copy()
         lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
@@ -345,7 +346,7 @@ def estimate_extrinsics(
     floor = None
     if config.align_floor:
         # standing from the reconstructed (triangulated) keypoints: body-internal, camera-free
-        standing = standing_scores(ba.points_world_m)
+        standing = standing_score(ba.points_world_m)
         floor = align_to_floor(ba.points_world_m, standing, R_final[0], upright_threshold=config.upright_threshold)
         R_final, t_final = floor.apply_to_camera(R_final, t_final)
     timings["floor"] = time.perf_counter() - clock

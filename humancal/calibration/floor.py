@@ -4,9 +4,10 @@ Until this step the world is camera 0's frame. The up direction comes from the p
 (heels, toes) of standing people when they cover enough of the floor (its normal is then known to a fraction
 of a degree), otherwise from the mean of their plumb lines (shoulders to ankles), whose individual leans
 average out over people facing different ways. The floor height is the median over standing people of their
-lowest sole point. Standing is judged on the reconstructed 3D keypoints themselves (:func:`standing_scores`:
-straight knees and hips, both feet down), which needs no camera: the lifter's upright score also asks for the
-body to be upright *in the image*, which fails for steeply pitched cameras and leaning views. The horizontal
+lowest sole point. Standing is judged on the reconstructed 3D keypoints themselves
+(:func:`humancal.lifter.standing_score`: straight knees and hips, both feet down), which needs no camera: the
+lifter's upright score also asks for the body to be upright *in the image*, which fails for steeply pitched
+cameras and leaning views. The horizontal
 origin is the median ground position of all people and the x axis is camera 0's viewing direction projected on
 the floor. The metric scale is kept (it comes from the lifted body size).
 """
@@ -20,7 +21,7 @@ import numpy as np
 
 from humancal.calibration.types import FOOT_JOINTS, CalibrationError, ankle_midpoints, plumb_points
 
-__all__ = ["FloorAlignment", "align_to_floor", "standing_scores", "STANDING_RAMPS"]
+__all__ = ["FloorAlignment", "align_to_floor"]
 
 logger = logging.getLogger(__name__)
 
@@ -52,61 +53,6 @@ class FloorAlignment:
         return R_cam_from_world @ self.Q_new_from_old.T, R_cam_from_world @ self.origin_old_m + t_cam_from_world_m
 
 
-STANDING_RAMPS: dict[str, tuple[float, float]] = {
-    "knee_bend_deg": (15.0, 35.0),
-    "hip_bend_deg": (15.0, 30.0),
-    "foot_step_m": (0.05, 0.15),
-}
-"""(full score, zero score) of each factor of :func:`standing_scores` (the body-internal factors of the lifter's
-upright score, ``docs/lifter.md``)."""
-
-
-def _falling(x: np.ndarray, full: float, zero: float) -> np.ndarray:
-    t = np.clip((x - full) / (zero - full), 0.0, 1.0)
-    return 1.0 - t * t * (3.0 - 2.0 * t)
-
-
-def standing_scores(points_m: np.ndarray) -> np.ndarray:
-    """How much each 3D pose is a standing one, in [0, 1], from body-internal geometry only (any frame).
-
-    The product of three factors, each 1 up to a "full" value and falling by a smoothstep to 0 at a "zero" value
-    (:data:`STANDING_RAMPS`): the larger knee bend (angle between thigh and shin), the larger hip bend (angle
-    between trunk and thigh), and the height difference of the ankles along the body axis (ankle midpoint to
-    shoulder midpoint).
-
-    Args:
-        points_m: (N, 23, 3) canonical keypoints, metres.
-
-    Returns:
-        (N,) scores (0 where a needed joint is not finite).
-    """
-    from humancal.keypoints import JOINT_INDEX as J
-
-    X = np.asarray(points_m, dtype=np.float64)
-
-    def angle_deg(a, b):
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cos = (a * b).sum(-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
-        return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-
-    shoulders = 0.5 * (X[:, J["left_shoulder"]] + X[:, J["right_shoulder"]])
-    hips = 0.5 * (X[:, J["left_hip"]] + X[:, J["right_hip"]])
-    knee, hip = [], []
-    for side in ("left", "right"):
-        thigh = X[:, J[f"{side}_knee"]] - X[:, J[f"{side}_hip"]]
-        shin = X[:, J[f"{side}_ankle"]] - X[:, J[f"{side}_knee"]]
-        knee.append(angle_deg(thigh, shin))
-        hip.append(angle_deg(hips - shoulders, thigh))
-    axis = shoulders - ankle_midpoints(X)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        axis = axis / np.linalg.norm(axis, axis=1, keepdims=True)
-    step = np.abs(((X[:, J["left_ankle"]] - X[:, J["right_ankle"]]) * axis).sum(1))
-    score = (_falling(np.maximum(*knee), *STANDING_RAMPS["knee_bend_deg"])
-             * _falling(np.maximum(*hip), *STANDING_RAMPS["hip_bend_deg"])
-             * _falling(step, *STANDING_RAMPS["foot_step_m"]))
-    return np.nan_to_num(score, nan=0.0)
-
-
 def _plane_normal(points: np.ndarray, iterations: int = 3) -> tuple[np.ndarray, float]:
     """Robust plane normal (unit, sign arbitrary) and the spread of the points in the plane (2nd singular value)."""
     keep = np.ones(len(points), bool)
@@ -134,7 +80,7 @@ def align_to_floor(
 
     Args:
         points_world_m: (G, 23, 3) keypoints of the matched groups, old world frame, metres.
-        upright_score: (G,) how much each group stands (e.g. :func:`standing_scores` of its keypoints).
+        upright_score: (G,) how much each group stands (e.g. :func:`humancal.lifter.standing_score` of its keypoints; NaN counts as not standing).
         R_cam0_from_world: (3, 3) camera 0's rotation in the old frame (its viewing direction sets the x axis).
         upright_threshold: groups at least this upright count as standing.
         min_spread_m: minimum in-plane spread (std) of the sole points to trust the plane normal, metres.

@@ -26,11 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from humancal.calibration.types import LiftedPoses
+from humancal.lifter.lifted import LiftedPoses
 from humancal.detections import DenseDetections
+from humancal.geometry.rotations import rotvec_to_rotmat
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
 
-__all__ = ["BundleResult", "bundle_adjust", "rotvec_to_rotmat"]
+__all__ = ["BundleResult", "bundle_adjust"]
 
 logger = logging.getLogger(__name__)
 
@@ -66,16 +67,6 @@ class BundleResult:
     iterations: int
     converged: bool
     group_scale: np.ndarray | None = None
-
-
-def rotvec_to_rotmat(rotvec: np.ndarray) -> np.ndarray:
-    """(..., 3) rotation vectors to (..., 3, 3) matrices (Rodrigues)."""
-    rotvec = np.asarray(rotvec, dtype=np.float64)
-    angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
-    axis = rotvec / np.where(angle > 1e-12, angle, 1.0)
-    K = _skew(axis)
-    s, c = np.sin(angle)[..., None], np.cos(angle)[..., None]
-    return np.eye(3) + s * K + (1.0 - c) * (K @ K)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:

@@ -22,8 +22,9 @@ from scipy.spatial.transform import Rotation
 
 from humancal.calibration.types import CalibrationError, LiftedPoses
 from humancal.detections import DenseDetections
+from humancal.geometry.rotations import project_to_rotmat, rotation_angle_deg
 
-__all__ = ["PairRotation", "pairwise_rotations", "average_rotations", "procrustes_rotations", "rotation_angle_deg"]
+__all__ = ["PairRotation", "pairwise_rotations", "average_rotations", "procrustes_rotations"]
 
 logger = logging.getLogger(__name__)
 
@@ -56,19 +57,6 @@ class PairRotation:
         return 0 if len(self.rows_a) == 0 else len(np.unique(self.rows_a))
 
 
-def rotation_angle_deg(R: np.ndarray) -> np.ndarray:
-    """Rotation angle of (..., 3, 3) rotation matrices, degrees."""
-    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-
-
-def _project_so3(M: np.ndarray) -> np.ndarray:
-    U, _, Vt = np.linalg.svd(M)
-    D = np.ones(M.shape[:-1])
-    D[..., -1] = np.sign(np.linalg.det(U @ Vt))
-    return (U * D[..., None, :]) @ Vt
-
-
 def procrustes_rotations(
     source: np.ndarray, target: np.ndarray, weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -82,7 +70,7 @@ def procrustes_rotations(
         R: (M, 3, 3) rotations; error_m: (M,) weighted RMS distance after alignment.
     """
     M = np.einsum("mj,mjk,mjl->mkl", weights, target, source)
-    R = _project_so3(M)
+    R = project_to_rotmat(M)
     aligned = source @ R.transpose(0, 2, 1)
     err = np.sqrt((weights * ((aligned - target) ** 2).sum(-1)).sum(1) / np.maximum(weights.sum(1), 1e-12))
     return R, err
@@ -135,7 +123,7 @@ def _consensus(R: np.ndarray, weight: np.ndarray, threshold_deg: float, max_cent
         inl = rotation_angle_deg(np.einsum("mji,jk->mik", R, centre)) < thr
         if inl.sum() == 0:
             break
-        centre = _project_so3((weight[inl, None, None] * R[inl]).sum(0))
+        centre = project_to_rotmat((weight[inl, None, None] * R[inl]).sum(0))
     return centre
 
 
@@ -214,7 +202,7 @@ def average_rotations(
     X = vecs[:, -3:].reshape(V, 3, 3)
     if np.sum(np.linalg.det(X) < 0) > V / 2:
         X[:, :, 0] *= -1
-    R = _project_so3(X)
+    R = project_to_rotmat(X)
     R = R @ R[0].T
     for _ in range(iterations):
         new = R.copy()
@@ -228,7 +216,7 @@ def average_rotations(
                 else:
                     continue
                 acc += w * est / max(np.linalg.norm(est - R[v]), 1e-3)
-            new[v] = _project_so3(acc)
+            new[v] = project_to_rotmat(acc)
         converged = np.abs(new - R).max() < 1e-7
         R = new
         if converged:

@@ -1,19 +1,18 @@
 """Inputs shared by the calibration steps: lifted 3D poses, the error type, body reference points.
 
-The calibration stage consumes, for every 2D detection, a 3D pose lifted from it (``LiftedPoses``): the
-canonical 23 keypoints in that view's camera frame, root-relative (root = hip midpoint), metres, plus the
-person's standing height and an "upright standing" score. Row ``d`` of a :class:`LiftedPoses` belongs to
-row ``d`` of the :class:`~humancal.detections.DenseDetections` it was lifted from.
+The calibration stage consumes, for every 2D detection, a 3D pose lifted from it: the lifter's
+:class:`~humancal.lifter.LiftedPoses` (the canonical 23 keypoints, root-relative, metres, in the detection's
+crop or camera frame, plus the person's standing height and an upright-standing score), row-aligned with the
+:class:`~humancal.detections.DenseDetections` it was lifted from.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from humancal.detections import DenseDetections
-from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
+from humancal.keypoints import JOINT_INDEX
+from humancal.lifter.lifted import LiftedPoses
 
 __all__ = [
     "CalibrationError",
@@ -45,105 +44,6 @@ FOOT_JOINTS: tuple[int, ...] = tuple(
 
 _ANKLES = (JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"])
 _HIPS = (JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"])
-
-
-@dataclass(frozen=True)
-class LiftedPoses:
-    """A 3D pose lifted from every detection (the lifter's output), row-aligned with the detections.
-
-    Attributes:
-        joints_cam_m: (D, 23, 3) canonical keypoints relative to the hip midpoint, metres, in the detection's
-            camera frame (OpenCV axes), or in its *crop frame* when ``box_centre_px`` is given (the camera frame
-            turned by the smallest rotation that brings the ray through the box centre onto the optical axis, as
-            ``humancal.lifter`` returns them before the intrinsics are known). May be NaN where not ``valid``.
-        height_m: (D,) the person's standing height estimate, metres.
-        upright_score: (D,) in [0, 1]: how much the pose is an upright standing one (straight legs and trunk,
-            both feet on the floor).
-        valid: (D,) whether the detection was lifted (default: all).
-        box_centre_px: (D, 2) box centres defining the crop frames, pixels; None when already in camera frames.
-    """
-
-    joints_cam_m: np.ndarray
-    height_m: np.ndarray
-    upright_score: np.ndarray
-    valid: np.ndarray | None = None
-    box_centre_px: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        joints = np.asarray(self.joints_cam_m, dtype=np.float64)
-        height = np.asarray(self.height_m, dtype=np.float64).reshape(-1)
-        upright = np.asarray(self.upright_score, dtype=np.float64).reshape(-1)
-        if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
-            raise ValueError(f"LiftedPoses.joints_cam_m must have shape (D, {NUM_JOINTS}, 3), got {joints.shape}")
-        D = joints.shape[0]
-        valid = np.ones(D, bool) if self.valid is None else np.asarray(self.valid, dtype=bool).reshape(-1)
-        if height.shape != (D,) or upright.shape != (D,) or valid.shape != (D,):
-            raise ValueError(
-                f"LiftedPoses: height_m {height.shape}, upright_score {upright.shape} and valid {valid.shape} must "
-                f"all be ({D},) like joints_cam_m"
-            )
-        if not np.isfinite(joints[valid]).all():
-            raise ValueError("LiftedPoses.joints_cam_m must be finite in every valid row")
-        if not (np.isfinite(height[valid]).all() and (height[valid] > 0).all()):
-            raise ValueError("LiftedPoses.height_m must be finite and positive (metres) in every valid row")
-        u = upright[valid]
-        if not (np.isfinite(u).all() and (u >= 0).all() and (u <= 1).all()):
-            raise ValueError("LiftedPoses.upright_score must lie in [0, 1] in every valid row")
-        # invalid rows: neutral values, so that no step can pick them up by accident
-        joints = np.where(valid[:, None, None], joints, np.nan)
-        height = np.where(valid, height, np.nan)
-        upright = np.where(valid, upright, 0.0)
-        box = None
-        if self.box_centre_px is not None:
-            box = np.asarray(self.box_centre_px, dtype=np.float64)
-            if box.shape != (D, 2) or not np.isfinite(box[valid]).all():
-                raise ValueError(f"LiftedPoses.box_centre_px must be finite with shape ({D}, 2), got {box.shape}")
-        object.__setattr__(self, "joints_cam_m", joints)
-        object.__setattr__(self, "height_m", height)
-        object.__setattr__(self, "upright_score", upright)
-        object.__setattr__(self, "valid", valid)
-        object.__setattr__(self, "box_centre_px", box)
-
-    def __len__(self) -> int:
-        return int(self.joints_cam_m.shape[0])
-
-    @property
-    def in_crop_frame(self) -> bool:
-        """Whether the joints are in the detections' crop frames (``box_centre_px`` given)."""
-        return self.box_centre_px is not None
-
-    def subset(self, rows: np.ndarray) -> LiftedPoses:
-        """The poses of the given rows (indices or boolean mask)."""
-        box = None if self.box_centre_px is None else self.box_centre_px[rows]
-        return LiftedPoses(self.joints_cam_m[rows], self.height_m[rows], self.upright_score[rows], self.valid[rows],
-                           box)
-
-    def in_camera_frame(self, K_per_detection: np.ndarray) -> LiftedPoses:
-        """The poses in their camera frames (a no-op when they already are).
-
-        Args:
-            K_per_detection: (D, 3, 3) intrinsics of each detection's view, pixels.
-        """
-        if self.box_centre_px is None:
-            return self
-        K = np.asarray(K_per_detection, dtype=np.float64)
-        centre = np.where(np.isfinite(self.box_centre_px), self.box_centre_px, 0.0)
-        ray = np.linalg.solve(K, np.concatenate([centre, np.ones((len(centre), 1))], axis=1)[..., None])[..., 0]
-        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-        # smallest rotation taking the ray onto +z (crop from camera); its transpose takes crop to camera
-        v = np.cross(ray, [0.0, 0.0, 1.0])
-        vx = np.zeros((len(ray), 3, 3))
-        vx[:, 0, 1], vx[:, 0, 2], vx[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-        vx = vx - vx.transpose(0, 2, 1)
-        R_crop_from_cam = np.eye(3) + vx + (vx @ vx) / (1.0 + ray[:, 2])[:, None, None]
-        joints = self.joints_cam_m @ R_crop_from_cam  # row vectors: (R^T x)^T = x^T R
-        return LiftedPoses(joints, self.height_m, self.upright_score, self.valid, None)
-
-    @classmethod
-    def from_lifter(cls, lifted) -> LiftedPoses:
-        """Adopt the output of ``humancal.lifter.lift_detections`` (crop or camera frame, with its ``valid``)."""
-        box = lifted.box_centre_px if getattr(lifted, "frame", "camera") == "crop" else None
-        return cls(lifted.joints_cam_m, lifted.height_m, lifted.upright_score, lifted.valid, box)
 
 
 def check_lifted(detections: DenseDetections, lifted: LiftedPoses) -> None:

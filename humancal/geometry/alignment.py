@@ -13,6 +13,8 @@ import numpy as np
 import roma
 import torch
 
+from humancal.camera import Camera
+
 __all__ = ["Similarity", "fit_similarity", "align_points"]
 
 
@@ -39,19 +41,11 @@ class Similarity:
         R_inv = self.R.T
         return Similarity(1.0 / self.scale, R_inv, -(R_inv @ self.t) / self.scale)
 
-    def apply_to_pose(self, R_cam_from_world: np.ndarray, t_cam_from_world_m: np.ndarray):
-        """Extrinsics of a camera in the target world: the same image, the centre moved and the unit scaled.
-
-        Args:
-            R_cam_from_world: (3, 3) rotation in the source world.
-            t_cam_from_world_m: (3,) translation in the source world.
-
-        Returns:
-            ``(R_cam_from_world, t_cam_from_world_m)`` in the target world.
-        """
-        R_new = np.asarray(R_cam_from_world, dtype=np.float64) @ self.R.T
-        centre = -np.asarray(R_cam_from_world, dtype=np.float64).T @ np.asarray(t_cam_from_world_m, dtype=np.float64)
-        return R_new, -R_new @ self.apply(centre)
+    def apply_to_camera(self, camera: Camera) -> Camera:
+        """The same camera expressed in the target world (its image is unchanged; the translation scaled)."""
+        R_new = camera.R_cam_from_world @ self.R.T
+        return Camera(camera.K, R_new, -R_new @ self.apply(camera.center_world_m), camera.width_px,
+                      camera.height_px, camera.distortion)
 
 
 def _registration(src: torch.Tensor, dst: torch.Tensor, weights: torch.Tensor | None, with_scale: bool):

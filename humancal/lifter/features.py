@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from humancal.geometry.rotations import rotmat_a_to_b
 from humancal.keypoints import NUM_JOINTS, joint_indices
 
 __all__ = [
@@ -171,14 +172,8 @@ def R_crop_from_cam(box_centre_px: np.ndarray, K: np.ndarray) -> np.ndarray:
     homogeneous = np.concatenate([centre, np.ones((centre.shape[0], 1))], axis=1)
     ray = np.linalg.solve(K, homogeneous[..., None])[..., 0]
     ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-    # Rodrigues form of the rotation taking unit vector a to unit vector b = z: R = I + [v]x + [v]x^2 / (1 + c)
-    # with v = a x b and c = a . b; a person in view has c > 0, far from the singular c = -1.
-    v = np.cross(ray, np.array([0.0, 0.0, 1.0]))
-    c = ray[:, 2]
-    vx = np.zeros((centre.shape[0], 3, 3))
-    vx[:, 0, 1], vx[:, 0, 2], vx[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    vx = vx - vx.transpose(0, 2, 1)
-    return np.eye(3) + vx + (vx @ vx) / (1.0 + c)[:, None, None]
+    # a person in view has ray . z > 0, far from the one singular case (opposite directions)
+    return rotmat_a_to_b(ray, np.array([0.0, 0.0, 1.0]))
 
 
 def rotate_crop_to_camera(joints_crop_m: np.ndarray, box_centre_px: np.ndarray, K: np.ndarray) -> np.ndarray:

@@ -9,16 +9,17 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
 
 from humancal.keypoints import FLIP_INDEX, NUM_JOINTS
 from humancal.lifter.config import LifterConfig
-from humancal.lifter.features import normalize_detections, rotate_crop_to_camera
+from humancal.lifter.features import normalize_detections
+from humancal.lifter.lifted import LiftedPoses
 from humancal.lifter.model import LifterNet
 from humancal.lifter.pose_cues import height_from_pose_m, upright_score
 
@@ -48,54 +49,6 @@ class Lifter:
     def min_joints(self) -> int:
         """Detections with fewer confident joints are not lifted."""
         return self.config.samples.min_joints
-
-
-@dataclass(frozen=True)
-class LiftedPoses:
-    """One lifted 3D pose per detection, row-aligned with the detections.
-
-    Attributes:
-        joints_cam_m: (D, 23, 3) keypoints relative to the hip midpoint, metres, in the frame named by
-            ``frame``, in the detection's label order (NaN rows where not ``valid``).
-        height_m: (D,) standing height from the lifted pose (:func:`height_from_pose_m`), metres (NaN where
-            not valid).
-        upright_score: (D,) :func:`upright_score` of the pose in its frame, in [0, 1] (NaN where not valid).
-        valid: (D,) whether the detection had enough joints (``Lifter.min_joints``) to be lifted.
-        box_centre_px: (D, 2) centre of the box of each detection's confident joints, pixels (defines the
-            crop frame).
-        frame: ``"crop"`` (each detection's crop frame) or ``"camera"`` (the view's camera frame).
-    """
-
-    joints_cam_m: np.ndarray
-    height_m: np.ndarray
-    upright_score: np.ndarray
-    valid: np.ndarray
-    box_centre_px: np.ndarray
-    frame: Literal["crop", "camera"]
-
-    def __len__(self) -> int:
-        return int(self.joints_cam_m.shape[0])
-
-    def in_camera_frame(self, K: np.ndarray) -> LiftedPoses:
-        """The same poses turned into the camera frame (no-op if already there).
-
-        Args:
-            K: (3, 3) or (D, 3, 3) intrinsics of each detection's view, pixels.
-
-        Raises:
-            ValueError: bad shape of K.
-        """
-        if self.frame == "camera":
-            return self
-        joints = np.full_like(self.joints_cam_m, np.nan)
-        K = np.asarray(K, dtype=np.float64)
-        if K.shape not in ((3, 3), (len(self), 3, 3)):
-            raise ValueError(f"K must have shape (3, 3) or ({len(self)}, 3, 3), got {K.shape}")
-        v = self.valid
-        if v.any():
-            K_valid = K if K.ndim == 2 else K[v]
-            joints[v] = rotate_crop_to_camera(self.joints_cam_m[v], self.box_centre_px[v], K_valid)
-        return LiftedPoses(joints, self.height_m, upright_score(joints), v, self.box_centre_px, "camera")
 
 
 def load_lifter(checkpoint: Mapping[str, Any] | str | Path, device: torch.device | str = "cpu") -> Lifter:
@@ -202,4 +155,7 @@ def lift_detections(
         )
     centre = normalized.box_centre_px
     lifted = LiftedPoses(joints, height_from_pose_m(joints), upright_score(joints), valid, centre, "crop")
-    return lifted if K is None else lifted.in_camera_frame(K)
+    if K is None:
+        return lifted
+    camera = lifted.in_camera_frame(K)
+    return replace(camera, upright_score=upright_score(camera.joints_cam_m))

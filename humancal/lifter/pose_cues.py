@@ -1,4 +1,4 @@
-"""Cues read from one 3D pose: the person's standing height and how much the pose is an upright standing one.
+"""Cues read from one 3D pose: the person's standing height and how much the pose is a standing, upright one.
 
 Both work on the canonical 23 keypoints of any pose (lifted or true) and need no camera, except that
 :func:`upright_score` reads "vertical" as the camera's up axis (-y, OpenCV).
@@ -15,6 +15,7 @@ __all__ = [
     "HEIGHT_OFFSET_M",
     "height_chain_m",
     "height_from_pose_m",
+    "standing_score",
     "upright_score",
 ]
 
@@ -106,26 +107,67 @@ UPRIGHT_RAMPS_DEG = {
     "side_lean": (8.0, 20.0),
     "tilt": (40.0, 70.0),
 }
-"""(full score, zero score) of each angle of :func:`upright_score`, degrees."""
+"""(full score, zero score) of each angle of :func:`upright_score` and :func:`standing_score`, degrees."""
 UPRIGHT_FOOT_STEP_M = (0.05, 0.15)
 """(full score, zero score) of the ankle height difference along the body axis, metres."""
+
+
+def _body_axis(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Body axis (ankle midpoint to shoulder midpoint) and its unit vector (NaN where degenerate)."""
+    axis = _mid(joints, "left_shoulder", "right_shoulder") - _mid(joints, "left_ankle", "right_ankle")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return axis, axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+
+
+def standing_score(joints_m: np.ndarray) -> np.ndarray:
+    """How much each pose is a standing one, in [0, 1], from body-internal geometry only (any frame).
+
+    The body-internal factors of :func:`upright_score`, each 1 up to a "full" value and falling smoothly
+    (smoothstep) to 0 at a "zero" value: knees extended (:data:`UPRIGHT_RAMPS_DEG` ``knee_bend``), hips
+    extended (``hip_bend``) and both feet down (:data:`UPRIGHT_FOOT_STEP_M`). It needs no camera, so it also
+    judges reconstructed world poses and poses whose camera is unknown.
+
+    Args:
+        joints_m: (D, 23, 3) canonical keypoints in any frame, metres.
+
+    Returns:
+        (D,) scores in [0, 1] (NaN where a needed joint is NaN).
+
+    Raises:
+        ValueError: wrong shape.
+    """
+    joints = _check_joints(joints_m, "joints_m")
+    hips = _mid(joints, "left_hip", "right_hip")
+    shoulders = _mid(joints, "left_shoulder", "right_shoulder")
+    knee_bend, hip_bend = [], []
+    for side in ("left", "right"):
+        thigh = joints[:, _J[f"{side}_knee"]] - joints[:, _J[f"{side}_hip"]]
+        shin = joints[:, _J[f"{side}_ankle"]] - joints[:, _J[f"{side}_knee"]]
+        knee_bend.append(_angle_deg(thigh, shin))
+        hip_bend.append(_angle_deg(hips - shoulders, thigh))
+    _, axis_unit = _body_axis(joints)
+    step = np.abs(((joints[:, _J["left_ankle"]] - joints[:, _J["right_ankle"]]) * axis_unit).sum(-1))
+    score = _falling_ramp(np.maximum(*knee_bend), *UPRIGHT_RAMPS_DEG["knee_bend"])
+    score = score * _falling_ramp(np.maximum(*hip_bend), *UPRIGHT_RAMPS_DEG["hip_bend"])
+    return score * _falling_ramp(step, *UPRIGHT_FOOT_STEP_M)
 
 
 def upright_score(joints_cam_m: np.ndarray) -> np.ndarray:
     """How much each pose is an upright standing one, in [0, 1], from a pose in a camera frame (y down).
 
-    The product of five factors, each 1 up to a "full" value and falling smoothly (smoothstep) to 0 at a
-    "zero" value (:data:`UPRIGHT_RAMPS_DEG`, :data:`UPRIGHT_FOOT_STEP_M`):
+    :func:`standing_score` (knees and hips extended, both feet down) times two factors that read the camera's
+    vertical, each 1 up to a "full" value and falling smoothly (smoothstep) to 0 at a "zero" value
+    (:data:`UPRIGHT_RAMPS_DEG`):
 
-    * knees extended: the larger angle between thigh (hip to knee) and shin (knee to ankle), 15 -> 35 deg;
-    * hips extended: the larger angle between the trunk (shoulder midpoint to hip midpoint) and a thigh,
-      15 -> 30 deg;
     * no sideways lean in the image: with ``a`` the body axis (ankle midpoint to shoulder midpoint),
       ``asin(|a_x| / |a|)``, 8 -> 20 deg;
     * body axis near the camera's up direction -y: the angle between ``a`` and -y, 40 -> 70 deg. The wide
       tolerance admits cameras pitched down or up by up to about 40 deg, whose view of an upright person is
-      tilted in the camera's y-z plane;
-    * both feet down: the difference of the two ankles along the body axis, 5 -> 15 cm.
+      tilted in the camera's y-z plane.
+
+    The standing factors: the larger angle between thigh (hip to knee) and shin (knee to ankle), 15 -> 35 deg;
+    the larger angle between the trunk (shoulder midpoint to hip midpoint) and a thigh, 15 -> 30 deg; the
+    difference of the two ankles along the body axis, 5 -> 15 cm.
 
     Args:
         joints_cam_m: (D, 23, 3) canonical keypoints in a camera frame (OpenCV: y down), metres; root-relative
@@ -138,23 +180,8 @@ def upright_score(joints_cam_m: np.ndarray) -> np.ndarray:
         ValueError: wrong shape.
     """
     joints = _check_joints(joints_cam_m, "joints_cam_m")
-    hips = _mid(joints, "left_hip", "right_hip")
-    shoulders = _mid(joints, "left_shoulder", "right_shoulder")
-    ankles = _mid(joints, "left_ankle", "right_ankle")
-    knee_bend, hip_bend = [], []
-    for side in ("left", "right"):
-        thigh = joints[:, _J[f"{side}_knee"]] - joints[:, _J[f"{side}_hip"]]
-        shin = joints[:, _J[f"{side}_ankle"]] - joints[:, _J[f"{side}_knee"]]
-        knee_bend.append(_angle_deg(thigh, shin))
-        hip_bend.append(_angle_deg(hips - shoulders, thigh))
-    axis = shoulders - ankles
-    with np.errstate(invalid="ignore", divide="ignore"):
-        axis_unit = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+    axis, axis_unit = _body_axis(joints)
     side_lean = np.degrees(np.arcsin(np.clip(np.abs(axis_unit[:, 0]), 0.0, 1.0)))
     tilt = _angle_deg(axis, np.array([0.0, -1.0, 0.0]))
-    step = np.abs(((joints[:, _J["left_ankle"]] - joints[:, _J["right_ankle"]]) * axis_unit).sum(-1))
-    score = _falling_ramp(np.maximum(*knee_bend), *UPRIGHT_RAMPS_DEG["knee_bend"])
-    score = score * _falling_ramp(np.maximum(*hip_bend), *UPRIGHT_RAMPS_DEG["hip_bend"])
-    score = score * _falling_ramp(side_lean, *UPRIGHT_RAMPS_DEG["side_lean"])
-    score = score * _falling_ramp(tilt, *UPRIGHT_RAMPS_DEG["tilt"])
-    return score * _falling_ramp(step, *UPRIGHT_FOOT_STEP_M)
+    score = standing_score(joints) * _falling_ramp(side_lean, *UPRIGHT_RAMPS_DEG["side_lean"])
+    return score * _falling_ramp(tilt, *UPRIGHT_RAMPS_DEG["tilt"])

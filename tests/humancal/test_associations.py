@@ -38,3 +38,11 @@ def test_round_trip_and_validation():
         Associations.from_table(_table().assign(person_id=-2))
     with pytest.raises(ValueError, match=r"lacks columns \['det_id'\]"):
         Associations.from_table(_table().drop(columns="det_id"))
+
+
+def test_row_of_finds_rows_in_any_order():
+    table = _table().sample(frac=1.0, random_state=1)
+    assoc = Associations.from_table(table)
+    rows = assoc.row_of(table["frame"].to_numpy()[::-1], table["view"].to_numpy()[::-1], table["det_id"].to_numpy()[::-1])
+    assert rows.tolist() == list(range(len(table)))[::-1]
+    assert assoc.row_of([0], [2], [0]).tolist() == [-1]

@@ -1,6 +1,6 @@
 """The per-sequence calibration assets (intrinsics, extrinsics, their checks) and the metric table, run by
 Dagster on a synthetic sequence whose ``detections`` artifact holds stand-in lifted poses (ground truth plus
-the noise of ``humancal.calibration.stand_in``), so that the test does not depend on a trained lifter."""
+the noise of the oracle ``evaluation.oracle``), so that the test does not depend on a trained lifter."""
 
 import dagster as dg
 import numpy as np
@@ -8,7 +8,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from humancal.calibration import stand_in_lifted_poses
+from evaluation.oracle import stand_in_lifted_poses
 from humancal.lifter import LiftedPoses, R_crop_from_cam, lifted_to_table, normalize_detections
 from humancal.synthetic import generate_scene, preset
 from humancal.tables import to_arrow

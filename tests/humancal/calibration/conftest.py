@@ -1,4 +1,4 @@
-"""Synthetic scenes with stand-in lifted poses, shared by the calibration tests (built once per module)."""
+"""Synthetic scenes with oracle (stand-in) lifted poses, shared by the calibration tests (built once per module)."""
 
 import numpy as np
 import pytest
@@ -18,7 +18,7 @@ def ring_scene(body_model):
 
 @pytest.fixture(scope="session")
 def ring_stand_in(ring_scene):
-    from humancal.calibration.stand_in import stand_in_lifted_poses
+    from evaluation.oracle import stand_in_lifted_poses
 
     return stand_in_lifted_poses(ring_scene, np.random.default_rng(0))
 
@@ -41,7 +41,7 @@ def simulate(scene, cameras: list[Camera], seed: int = 1):
     Returns:
         (DenseDetections, LiftedPoses, person_id)
     """
-    from humancal.calibration.stand_in import lift_ground_truth
+    from evaluation.oracle import lift_ground_truth
     from humancal.synthetic import simulate_detections
 
     out = simulate_detections(scene.keypoints_world_m, scene.height_m, cameras, scene.config.noise,

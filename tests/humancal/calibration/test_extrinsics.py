@@ -136,13 +136,13 @@ def _to_crop(lifted, dets, cameras):
     rotvec = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12) * angle[:, None]
     R_crop_from_cam = Rotation.from_rotvec(rotvec).as_matrix()
     crop = lifted.joints_cam_m @ R_crop_from_cam.transpose(0, 2, 1)
-    return LiftedPoses(crop, lifted.height_m, lifted.upright_score, None, centre), K
+    return LiftedPoses(crop, lifted.height_m, lifted.upright_score, None, centre, "crop"), K
 
 
 def test_crop_frame_poses_are_turned_into_camera_frames(ring_scene, ring_stand_in):
     cams = list(ring_scene.rig)
     crop, K = _to_crop(ring_stand_in.lifted, ring_stand_in.detections, cams)
-    assert crop.in_crop_frame
+    assert crop.frame == "crop"
     back = crop.in_camera_frame(K)
     assert np.allclose(back.joints_cam_m, ring_stand_in.lifted.joints_cam_m, atol=1e-9)
     _, result = _calibrate(ring_stand_in.detections, crop, cams, config=ExtrinsicsConfig(max_groups=100))

@@ -80,19 +80,15 @@ def test_inputs_are_checked(ring_scene, ring_stand_in):
         LiftedPoses(lifted.joints_cam_m[:2], lifted.height_m[:2], np.array([0.5, 1.5]))
 
 
-def test_invalid_lifts_are_ignored_and_lifter_output_is_adopted(ring_scene, ring_stand_in):
-    from types import SimpleNamespace
-
+def test_invalid_lifts_are_ignored(ring_scene, ring_stand_in):
     from humancal.calibration.rotation_consensus import pairwise_rotations
 
     lifted = ring_stand_in.lifted
     valid = np.random.default_rng(0).random(len(lifted)) > 0.2
     joints = np.where(valid[:, None, None], lifted.joints_cam_m, np.nan)
-    out = SimpleNamespace(joints_cam_m=joints, height_m=np.where(valid, lifted.height_m, np.nan),
-                          upright_score=np.where(valid, lifted.upright_score, np.nan), valid=valid,
-                          box_centre_px=np.zeros((len(lifted), 2)), frame="camera")
-    adopted = LiftedPoses.from_lifter(out)
-    assert not adopted.in_crop_frame and np.all(adopted.upright_score[~valid] == 0)
+    adopted = LiftedPoses(joints, np.where(valid, lifted.height_m, np.nan),
+                          np.where(valid, lifted.upright_score, np.nan), valid, np.zeros((len(lifted), 2)))
+    assert adopted.frame == "camera" and np.isnan(adopted.upright_score[~valid]).all()
     est = estimate_intrinsics(ring_stand_in.detections, adopted, _sizes(ring_scene))
     assert all(np.isfinite(e.fx_px) for e in est)
     pairs = pairwise_rotations(ring_stand_in.detections, adopted, 4, np.random.default_rng(0))

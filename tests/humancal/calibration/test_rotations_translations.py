@@ -4,15 +4,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from evaluation.oracle import lift_ground_truth
 from humancal.calibration import CalibrationError
 from humancal.calibration.rotation_consensus import (
     PairRotation,
     average_rotations,
     pairwise_rotations,
     procrustes_rotations,
-    rotation_angle_deg,
 )
-from humancal.calibration.stand_in import lift_ground_truth
 from humancal.calibration.translations import (
     resect_focal_translation,
     root_positions,
@@ -20,6 +19,7 @@ from humancal.calibration.translations import (
 )
 from humancal.calibration.types import hip_midpoints
 from humancal.camera import project_points
+from humancal.geometry.rotations import rotation_angle_deg
 
 
 def test_procrustes_recovers_a_rotation():

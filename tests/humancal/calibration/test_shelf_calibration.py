@@ -27,7 +27,7 @@ def test_shelf_initialisation_beats_the_paper(shelf_root):
     from evaluation.camera_metrics import camera_errors, reprojection_errors_per_view
     from evaluation.detection_quality import evaluate_grouping
     from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
-    from humancal.calibration.stand_in import canonical_from_shelf15, stand_in_from_matches
+    from evaluation.oracle import canonical_from_shelf15, stand_in_from_matches
     from humancal.datasets.shelf import SHELF15_JOINTS, load_shelf
 
     shelf = load_shelf(shelf_root)
@@ -69,7 +69,7 @@ def test_shelf_initialisation_with_the_learned_lifter(shelf_root):
     """The 2D detections lifted by the learned lifter (no ground truth in the lifting)."""
     from evaluation.camera_metrics import camera_errors, reprojection_errors_per_view
     from evaluation.detection_quality import evaluate_grouping
-    from humancal.calibration import IntrinsicsConfig, LiftedPoses, estimate_extrinsics, estimate_intrinsics
+    from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
     from humancal.datasets.shelf import load_shelf
     from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter
@@ -77,8 +77,8 @@ def test_shelf_initialisation_with_the_learned_lifter(shelf_root):
     lifter = load_lifter(_lifter_checkpoint())
     shelf = load_shelf(shelf_root)
     dense = detections_to_dense(shelf.detections)
-    lifted = LiftedPoses.from_lifter(lift_detections(lifter, dense.keypoints_px, dense.scores))
-    assert lifted.in_crop_frame
+    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
+    assert lifted.frame == "crop"
     intr = estimate_intrinsics(dense, lifted, shelf.image_size_px, IntrinsicsConfig(missing_upright="defer"))
     result = estimate_extrinsics(dense, lifted, intr)
     gt = list(shelf.cameras)

@@ -1,7 +1,7 @@
-"""A stand-in for the 2D-to-3D lifter, built from synthetic ground truth (an evaluation aid, not the method).
+"""An oracle in place of the 2D-to-3D lifter: lifted poses made from the ground truth (evaluation only).
 
-The calibration stage needs one lifted 3D pose per detection (:class:`~humancal.calibration.types.LiftedPoses`).
-To develop and test it without the learned lifter, :func:`stand_in_lifted_poses` makes them from the ground
+The calibration stage needs one lifted 3D pose per detection (:class:`~humancal.lifter.LiftedPoses`). To
+develop, test and bound it without the learned lifter, :func:`stand_in_lifted_poses` makes them from the ground
 truth of a synthetic scene, with lifter-like errors:
 
 * the person's true keypoints are moved into the detection's camera frame and made relative to the hip midpoint;
@@ -11,10 +11,13 @@ truth of a synthetic scene, with lifter-like errors:
 * a detection whose 2D labels are left-right flipped gets a lifted pose with the same flip (the lifter sees the
   flipped 2D), and with probability ``depth_flip_rate`` the pose is mirrored in depth (the monocular ambiguity);
 * false positives get the pose of a random other person-frame, turned about the camera's vertical axis;
-* the upright score comes from the true pose's internal angles only (knees, hips, ankle heights along the
-  body axis), like a lifter that does not know the vertical.
+* the upright score (:func:`upright_scores`) comes from the true pose's internal angles only (knees, hips,
+  ankle heights along the body axis), like a lifter that does not know the vertical. It is deliberately more
+  permissive than the library's :func:`humancal.lifter.standing_score` (Gaussian factors instead of
+  smoothstep ramps); the calibration tests' figures were set with it.
 
-Never use it for reporting the method's accuracy on real data: it knows the true identities and poses.
+Never use it for reporting the method's accuracy on real data: it knows the true identities and poses. The
+library never imports it.
 """
 
 from __future__ import annotations
@@ -24,10 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.calibration.types import LiftedPoses, ankle_midpoints, hip_midpoints
+from humancal.associations import Associations
+from humancal.calibration.types import ankle_midpoints, hip_midpoints
 from humancal.camera import Camera
 from humancal.detections import DenseDetections, detections_to_dense
+from humancal.geometry.rotations import axis_angle_to_rotmat
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX
+from humancal.lifter import LiftedPoses
 
 __all__ = [
     "StandIn",
@@ -95,12 +101,7 @@ def upright_scores(keypoints: np.ndarray) -> np.ndarray:
 def _random_rotations(n: int, std_deg: float, rng: np.random.Generator) -> np.ndarray:
     axis = rng.normal(size=(n, 3))
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    angle = np.radians(std_deg) * rng.normal(size=n)
-    K = np.zeros((n, 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
-    K = K - K.transpose(0, 2, 1)
-    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
-    return np.eye(3) + s * K + (1 - c) * K @ K
+    return axis_angle_to_rotmat(axis, np.radians(std_deg) * rng.normal(size=n))
 
 
 def lift_ground_truth(
@@ -191,14 +192,10 @@ def stand_in_lifted_poses(
     """
     dense = detections_to_dense(scene.detections)
     d = scene.detector
-    truth = pd.DataFrame(
-        {"frame": d.frame, "view": d.view, "det_id": scene.det_id, "person_id": d.person_id, "flipped": d.flipped}
-    ).set_index(["frame", "view", "det_id"])
-    index = pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])
-    truth = truth.reindex(index)
-    if truth["person_id"].isna().any():
+    row = Associations(d.frame, d.view, scene.det_id, d.person_id).row_of_detections(dense)
+    if (row < 0).any():
         raise ValueError("stand_in_lifted_poses: scene.detections and scene.detector disagree on detection keys")
-    person_id = truth["person_id"].to_numpy(np.int64)
+    person_id = np.asarray(d.person_id, dtype=np.int64)[row]
     lifted = lift_ground_truth(
         scene.keypoints_world_m,
         scene.height_m,
@@ -206,7 +203,7 @@ def stand_in_lifted_poses(
         dense.frame,
         dense.view,
         person_id,
-        truth["flipped"].to_numpy(bool),
+        np.asarray(d.flipped, dtype=bool)[row],
         rng,
         joint_noise_m=joint_noise_m,
         height_noise_m=height_noise_m,
@@ -244,9 +241,7 @@ def stand_in_from_matches(
     """
     dense = detections_to_dense(detections)
     m = matches[matches["det_id"] >= 0].drop_duplicates(["frame", "view", "det_id"])
-    ids = m.set_index(["frame", "view", "det_id"])["person_id"]
-    index = pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])
-    person_id = ids.reindex(index).fillna(-1).to_numpy(np.int64)
+    person_id = Associations.from_table(m).person_of_detections(dense)
     usable = np.isfinite(keypoints_world_m).all((-1, -2))  # (P, F)
     ok = person_id >= 0
     ok[ok] = usable[person_id[ok], dense.frame[ok]]
