@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from humancal.geometry.rotations import axis_angle_to_rotmat
+
 __all__ = [
     "CHANNELS",
     "CHANNEL_INDEX",
@@ -98,28 +100,6 @@ REQUIRED_BONES: tuple[str, ...] = (
 _FORWARD = np.array([0.0, -1.0, 0.0])
 """The reference pose faces -y."""
 _MIRROR = np.array([-1.0, 1.0, 1.0])
-
-
-def axis_angle_to_rotmat(axis: np.ndarray, angle_rad: np.ndarray) -> np.ndarray:
-    """Rotation matrices from unit axes and angles (Rodrigues).
-
-    Args:
-        axis: (..., 3) unit axes (broadcast against ``angle_rad``).
-        angle_rad: (...) angles, radians, right-handed about ``axis``.
-
-    Returns:
-        (..., 3, 3) rotation matrices.
-    """
-    axis = np.asarray(axis, dtype=np.float64)
-    angle = np.asarray(angle_rad, dtype=np.float64)
-    shape = np.broadcast_shapes(axis.shape[:-1], angle.shape)
-    axis = np.broadcast_to(axis, shape + (3,))
-    angle = np.broadcast_to(angle, shape)
-    x, y, z = axis[..., 0], axis[..., 1], axis[..., 2]
-    zero = np.zeros(shape)
-    skew = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], axis=-1).reshape(shape + (3, 3))
-    s, c = np.sin(angle)[..., None, None], np.cos(angle)[..., None, None]
-    return np.eye(3) + s * skew + (1.0 - c) * (skew @ skew)
 
 
 def _rot(axis: str, angle_deg: np.ndarray) -> np.ndarray:

@@ -7,10 +7,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humancal.camera import Camera
 from humancal.formats.errors import FormatError
+from humancal.geometry.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
 __all__ = [
     "ROTATION_TOLERANCE",
@@ -74,12 +74,12 @@ def rotation_matrix(R: np.ndarray, path: PathLike, field: str) -> np.ndarray:
 
 def rotation_from_rotvec(rotvec: np.ndarray) -> np.ndarray:
     """(3, 3) rotation matrix of an axis-angle (Rodrigues) vector, radians."""
-    return Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64).reshape(3)).as_matrix()
+    return rotvec_to_rotmat(np.asarray(rotvec, dtype=np.float64).reshape(3))
 
 
 def rotvec_from_rotation(R: np.ndarray) -> np.ndarray:
     """(3,) axis-angle (Rodrigues) vector of a rotation matrix, radians."""
-    return Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec()
+    return rotmat_to_rotvec(np.asarray(R, dtype=np.float64))
 
 
 def intrinsic_matrix(value: object, path: PathLike, field: str, shapes=((3, 3), (9,))) -> np.ndarray:
