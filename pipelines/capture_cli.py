@@ -82,7 +82,7 @@ def cmd_add(args: argparse.Namespace) -> int:
     print(f"registered {spec.key} in {user_config_path()}:")
     print("\n".join(capture.summary.lines()))
     print(f"next: humancal update --partition {spec.key}\n"
-          f"      humancal export cameras --partition {spec.key} --cameras-asset extrinsics --format pose2sim --out cameras.toml")
+          f"      humancal export cameras --partition {spec.key} --format pose2sim --out cameras.toml")
     return 0
 
 
