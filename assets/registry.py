@@ -4,7 +4,7 @@
 import dagster as dg
 import pandas as pd
 
-from pipelines.partitions import SEQUENCES
+from assets.partitions import SEQUENCES
 from resources.datasets import DatasetsResource
 
 

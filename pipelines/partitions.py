@@ -1,9 +1,5 @@
-"""Partitions: one dynamic partition per sequence, keyed ``<dataset>__<sequence>``.
+"""Partitions of the graph; defined with the assets in :mod:`assets.partitions` (assets never import pipelines)."""
 
-Keys are registered from the datasets config (``humancal.sequences``) by the CLI before any run and
-by the ``sequence_registry`` asset for users who drive Dagster directly.
-"""
+from assets.partitions import SEQUENCES
 
-import dagster as dg
-
-SEQUENCES = dg.DynamicPartitionsDefinition(name="sequences")
+__all__ = ["SEQUENCES"]

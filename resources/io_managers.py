@@ -13,9 +13,10 @@ target only when complete, so a killed run never leaves a half-written artifact 
 
 from __future__ import annotations
 
+import hashlib
 import io
 import uuid
-from typing import Any
+from typing import Any, Literal
 
 import dagster as dg
 import pandas as pd
@@ -25,6 +26,7 @@ import torch
 from dagster._core.storage.upath_io_manager import UPathIOManager
 from upath import UPath
 
+from humancal.lifter import checkpoint_digest
 from humancal.tables import SCHEMAS, check_values, table_to_pandas, to_arrow
 
 TABLE_METADATA_KEY = "humancal/table"
@@ -39,6 +41,74 @@ def partition_path(root: str | UPath, asset_key: str, partition_key: str | None,
     """Where an asset (partition) lives under ``root``: the one place this layout is defined."""
     base = UPath(root).joinpath(*asset_key.split("/"))
     return UPath(f"{base}/{partition_key}{extension}") if partition_key else UPath(f"{base}{extension}")
+
+
+ArtifactKind = Literal["table", "checkpoint"]
+"""What an IO manager of this module stores: a canonical table (Parquet) or a torch checkpoint."""
+
+CONTENT_VERSION_CHARS = 16
+"""Hex characters of the SHA-256 kept as a content data version."""
+
+
+def table_content_version(df: pd.DataFrame, name: str) -> str:
+    """Content hash of canonical table ``name``: SHA-256 of its Arrow IPC stream, as written by :func:`to_arrow`.
+
+    The data version of every table asset, and what :func:`stored_content_version` recomputes from the
+    stored file: the one definition both sides share.
+    """
+    # One record batch whatever the column chunking (a concatenated frame is chunked, the file read back is
+    # not), so equal content gives equal bytes.
+    table = to_arrow(df, name).combine_chunks()
+    sink = pa.BufferOutputStream()
+    with pa.ipc.new_stream(sink, table.schema) as writer:
+        writer.write_table(table)
+    return hashlib.sha256(sink.getvalue().to_pybytes()).hexdigest()[:CONTENT_VERSION_CHARS]
+
+
+def checkpoint_content_version(checkpoint: dict) -> str:
+    """Content hash of a checkpoint: :func:`humancal.lifter.checkpoint_digest` (weights, config, subjects)."""
+    return checkpoint_digest(checkpoint)[:CONTENT_VERSION_CHARS]
+
+
+def stored_content_version(path: str | UPath, kind: ArtifactKind, table: str | None = None) -> str:
+    """The content version of a stored artifact, computed from the file as the asset computed it from its output.
+
+    Args:
+        path: the artifact file (:func:`partition_path`).
+        kind: ``"table"`` (Parquet) or ``"checkpoint"``.
+        table: canonical table name of a ``"table"`` artifact.
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        ArtifactError: the file cannot be read as that kind of artifact (damaged, truncated, other content).
+        ValueError: ``kind`` is unknown, or a table artifact without its table name.
+    """
+    path = UPath(path)
+    if kind == "table":
+        if table is None:
+            raise ValueError("stored_content_version: a table artifact needs its canonical table name (table=...)")
+        try:
+            with path.open("rb") as f:
+                stored = pq.read_table(f)
+            return table_content_version(table_to_pandas(stored, table), table)
+        except FileNotFoundError:
+            raise
+        except Exception as err:  # arrow raises several types for bytes that are not Parquet, or another table
+            raise ArtifactError(f"{path} is not a readable '{table}' table ({_first_line(err)})") from None
+    if kind == "checkpoint":
+        try:
+            with path.open("rb") as f:
+                checkpoint = torch.load(io.BytesIO(f.read()), weights_only=True, map_location="cpu")
+            return checkpoint_content_version(checkpoint)
+        except FileNotFoundError:
+            raise
+        except Exception as err:  # torch raises several unrelated types for a damaged file
+            raise ArtifactError(f"{path} is not a readable checkpoint ({_first_line(err)})") from None
+    raise ValueError(f"stored_content_version: kind must be 'table' or 'checkpoint', got {kind!r}")
+
+
+def _first_line(err: BaseException) -> str:
+    return str(err).splitlines()[0] if str(err) else type(err).__name__
 
 
 def _write_chunks(f, payload: bytes, chunk_bytes: int = 1 << 22) -> None:
