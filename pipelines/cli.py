@@ -173,6 +173,8 @@ def cmd_update(args) -> int:
 
 
 def _report_failures(result) -> int:
+    for line in result.waiting_lines():  # left because an input cannot be brought up to date here
+        print(line)
     if not result.failed:
         return 0
     print(f"{len(result.failed)} asset partition(s) failed (what depends on them was left out):", file=sys.stderr)
