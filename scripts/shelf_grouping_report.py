@@ -30,11 +30,10 @@ def _report(name: str, config: GroupingConfig) -> pd.DataFrame:
     start = time.perf_counter()
     metrics = evaluate_grouping(shelf.detections, shelf.gt_poses, shelf.cameras, dataset="shelf", method=name).metrics
     eval_s = time.perf_counter() - start
-    values = metrics.set_index("metric")["value"]
+    values = metrics.assign(scope=[f"view_{v}" if pd.notna(v) else "overall" for v in metrics["view"]])
+    values = values.set_index(["metric", "scope"])["value"]
     scopes = ["overall"] + [f"view_{v}" for v in range(shelf.num_views)]
-    table = pd.DataFrame(
-        {m: [values[m if s == "overall" else f"{m}/{s}"] for s in scopes] for m in _SHOWN}, index=scopes
-    )
+    table = pd.DataFrame({m: [values[(m, s)] for s in scopes] for m in _SHOWN}, index=scopes)
     formats = {m: "{:.4f}" for m in _SHOWN[:2]} | {_SHOWN[2]: "{:.2f}"} | {m: "{:.0f}" for m in _SHOWN[3:]}
     print(
         f"\n{name}: {shelf.num_frames} frames x {shelf.num_views} views; "
