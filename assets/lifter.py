@@ -6,7 +6,6 @@ from pathlib import Path
 
 import dagster as dg
 import pandas as pd
-import torch
 
 from assets.common import ON_REQUEST_KEY, UPDATE_CONDITION, png_metadata, table_metadata, table_output, versioned_output
 from evaluation.protocols import MetricRow, metrics_table
@@ -24,10 +23,7 @@ from humancal.lifter import (
 )
 from humancal.retarget import motions_table_to_clips
 from resources.lifter_source import active_lifter
-
-TRAINING_THREADS = 1
-"""torch threads while training: the network is small, and on a 2-core machine shared with other work two
-threads measured several times slower than one."""
+from resources.torch import TorchResource
 
 HELD_OUT_SEQUENCE = "held_out_" + "_".join(HELD_OUT_CMU_SUBJECTS)
 """Sequence name of the held-out figures in the metrics table (dataset ``cmu_mocap``)."""
@@ -77,7 +73,9 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
         metadata={ON_REQUEST_KEY: "humancal train lifter"},
         automation_condition=UPDATE_CONDITION,
     )
-    def lifter_trained(context: dg.AssetExecutionContext, mocap_clips: pd.DataFrame) -> dg.Output:
+    def lifter_trained(
+        context: dg.AssetExecutionContext, torch_runtime: TorchResource, mocap_clips: pd.DataFrame
+    ) -> dg.Output:
         """The 2D-to-3D lifter trained here on the retargeted CMU clips, subjects 02 and 14 held out
         (docs/lifter.md). Trained on request (``humancal train lifter`` or the weekly schedule), never by a
         plain update: the shipped weights serve until then."""
@@ -95,12 +93,11 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
                     f"({record['elapsed_s']:.0f} s)"
                 )
 
-        threads = torch.get_num_threads()
-        torch.set_num_threads(TRAINING_THREADS)
-        try:
+        # Training runs on the CPU with the resource's threads (one by default: the network is small, and on a
+        # 2-core machine shared with other work two threads measured several times slower than one); the
+        # training's own randomness comes from config.seed.
+        with torch_runtime.applied():
             checkpoint, history = train_lifter(train, val, config, progress=progress)
-        finally:
-            torch.set_num_threads(threads)
         final = checkpoint["val_metrics"]
         with tempfile.TemporaryDirectory() as tmp:
             png = plot_training_history(history, Path(tmp) / "history.png", title="lifter training")
