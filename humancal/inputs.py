@@ -121,8 +121,8 @@ def _data_folder(spec: SequenceSpec, data_root: Path | None) -> Path:
 
 
 def _load_shelf(spec: SequenceSpec, folder: Path) -> SequenceInputs:
-    from evaluation.detection_quality import evaluate_grouping
     from humancal.camera import cameras_to_table
+    from humancal.datasets.gt_matching import match_ground_truth
     from humancal.datasets.shelf import load_shelf
 
     shelf = load_shelf(folder)
@@ -132,7 +132,7 @@ def _load_shelf(spec: SequenceSpec, folder: Path) -> SequenceInputs:
     # Shelf does not say who each detection is; for evaluation and the identified baselines, a detection
     # is the ground-truth person it matches (one-to-one per view and frame, mean joint error under 5 % of
     # the image diagonal), otherwise -1.
-    matched = evaluate_grouping(detections, gt_poses, list(shelf.cameras), dataset=spec.dataset).person_views
+    matched = match_ground_truth(detections, gt_poses, list(shelf.cameras)).person_views
     matched = matched[matched["det_id"] >= 0]
     ids = detections[["sequence", "frame", "view", "det_id"]].drop_duplicates()
     ids = ids.merge(matched[["frame", "view", "det_id", "person_id"]], on=["frame", "view", "det_id"], how="left")

@@ -1,4 +1,4 @@
-"""Accuracy of a lifter on synthesised samples with known 3D truth (``evaluation.metrics``).
+"""Accuracy of a lifter on synthesised samples with known 3D truth (``humancal.geometry.pose_errors``).
 
 All pose errors are root-relative (hip midpoint at the origin on both sides):
 
@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm
+from humancal.geometry.pose_errors import mpjpe_mm, pa_mpjpe_mm
 from humancal.lifter.data import LifterSamples, synthesize_samples
 from humancal.lifter.infer import Lifter, lift_detections
 from humancal.lifter.pose_cues import height_from_pose_m
