@@ -4,6 +4,7 @@
     humancal update [--partition P ...]  materialize only what is missing or stale
     humancal report [--partition P] [--format md|csv]   (P may also be cmu_mocap__held_out_02_14)
     humancal export detections|cameras --partition P --format F --out PATH
+    humancal train lifter [--discard]    train the lifter here (replaces the shipped weights), or go back to them
     humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/capture_cli.py)
     humancal ui                          the Dagster UI on 127.0.0.1
 
@@ -88,9 +89,9 @@ def _stored_metrics(partitions: list[str] | None, headline_only: bool):
     shared = {key: partition_path(artifacts_root(), asset, None) for key, asset in SHARED_METRIC_TABLES.items()}
     if partitions:
         files = [shared.get(p) or partition_path(artifacts_root(), "metric_tables", p) for p in partitions]
-        missing = [str(f) for f in files if not f.exists()]
+        missing = [p for p, f in zip(partitions, files) if not f.exists()]
         if missing:
-            raise SystemExit(f"humancal: no metric table stored for {missing}; run `humancal update` first")
+            raise SystemExit(f"humancal: {_explain_missing_tables(missing)}")
     else:
         folder = UPath(artifacts_root()) / "metric_tables"
         files = [f for f in shared.values() if f.exists()]
@@ -112,11 +113,12 @@ def cmd_demo(args) -> int:
 
     instance = _instance()
     register_partitions(instance, defs)
-    print(f"humancal demo: materializing what {DEMO_PARTITION} needs (the first run trains the lifter on the CMU "
-          "mocap: about 15 minutes on 2 cores; later runs reuse it) ...", flush=True)
+    print(f"humancal demo: materializing what {DEMO_PARTITION} needs (the first run builds the body model's cache, "
+          "about a minute; later runs reuse it) ...", flush=True)
+    _print_active_lifter()
     t0 = time.perf_counter()
-    exclude = _report_missing_data(defs)
-    result = update(defs, instance, partitions=[DEMO_PARTITION], exclude=list(exclude), on_round=_print_round,
+    exclude = [*_report_missing_data(defs), *_assets_on_request(defs)]
+    result = update(defs, instance, partitions=[DEMO_PARTITION], exclude=exclude, on_round=_print_round,
                     run_config=QUIET_RUN_CONFIG)
     print(f"materialized {result.count} asset partitions in {time.perf_counter() - t0:.1f} s\n", flush=True)
     if _report_failures(result):
@@ -143,6 +145,21 @@ def _report_missing_data(defs) -> dict:
     return exclude
 
 
+def _assets_on_request(defs) -> list:
+    """Assets that ``update`` never computes on its own (``lifter_trained``: ``humancal train lifter`` does)."""
+    from assets.common import ON_REQUEST_KEY
+
+    graph = defs.resolve_asset_graph()
+    return [key for key in graph.materializable_asset_keys if (graph.get(key).metadata or {}).get(ON_REQUEST_KEY)]
+
+
+def _print_active_lifter() -> None:
+    from pipelines.definitions import artifacts_root
+    from resources.lifter_source import active_lifter
+
+    print(active_lifter(artifacts_root()).describe(), flush=True)
+
+
 def _assets_missing_data(defs) -> dict:
     """Unpartitioned assets whose external data folder is not under the data root here."""
     from assets.common import REQUIRES_DATA_KEY
@@ -165,8 +182,9 @@ def cmd_update(args) -> int:
     register_partitions(instance, defs)
     _check_partitions(args.partition, defs)
 
-    exclude = _report_missing_data(defs)
-    result = update(defs, instance, partitions=args.partition or None, exclude=list(exclude),
+    _print_active_lifter()
+    exclude = [*_report_missing_data(defs), *_assets_on_request(defs)]
+    result = update(defs, instance, partitions=args.partition or None, exclude=exclude,
                     on_round=_print_round, run_config=QUIET_RUN_CONFIG)
     print(f"materialized {result.count} asset partitions")
     return _report_failures(result)
@@ -181,6 +199,18 @@ def _report_failures(result) -> int:
     for asset, partition, message in result.failed:
         print(f"  {asset}[{partition}]: {message}" if partition else f"  {asset}: {message}", file=sys.stderr)
     return 1
+
+
+def _explain_missing_tables(missing: list[str]) -> str:
+    """Why no table is stored: an unknown partition (named, with the known ones) or one never computed."""
+    from pipelines.definitions import defs
+
+    known = sorted({spec.key for spec in defs.resources["datasets"].available()} | set(SHARED_METRIC_TABLES))
+    unknown = [p for p in missing if p not in known]
+    if unknown:
+        return f"unknown partition(s) {', '.join(unknown)}; known here: {', '.join(known)}"
+    command = "humancal update" + "".join(f" --partition {p}" for p in missing if p not in SHARED_METRIC_TABLES)
+    return f"no metric table stored yet for {', '.join(missing)}; run `{command}`"
 
 
 def cmd_report(args) -> int:
@@ -221,6 +251,49 @@ def cmd_export(args) -> int:
     return 0
 
 
+def cmd_train(args) -> int:
+    """Train the lifter on the CMU mocap under the data root; from then on it replaces the shipped weights."""
+    import dagster as dg
+
+    from humancal.lifter import LifterConfig
+    from pipelines.definitions import artifacts_root, build_definitions
+    from resources.lifter_source import trained_lifter_path
+
+    trained = trained_lifter_path(artifacts_root())
+    if args.discard:
+        if trained.exists():
+            trained.unlink()
+            print(f"deleted {trained}: the shipped lifter is in force again; `humancal update` re-lifts with it")
+        else:
+            print("no trained lifter stored: the shipped lifter is already in force")
+        _print_active_lifter()
+        return 0
+    overrides = {k: v for k, v in (("seed", args.seed), ("epochs", args.epochs)) if v is not None}
+    config = LifterConfig.default().replace(**overrides)
+    defs = build_definitions(lifter_config=config)
+    instance = _instance()
+    missing = _assets_missing_data(defs)
+    if dg.AssetKey("mocap_clips") in missing:
+        raise SystemExit(f"humancal: training the lifter needs {missing[dg.AssetKey('mocap_clips')]}/ under the data "
+                         "root (set HUMANCAL_DATA_DIR); the shipped lifter stays in force")
+    selection = [dg.AssetKey("lifter_trained")]
+    if instance.get_latest_materialization_event(dg.AssetKey("mocap_clips")) is None:
+        selection.insert(0, dg.AssetKey("mocap_clips"))
+    print(f"training the lifter ({config.epochs} epochs of {config.samples_per_epoch} samples, seed {config.seed}; "
+          "about 15 minutes on 2 cores" + (", after retargeting the CMU mocap" if len(selection) == 2 else "") + ") ...",
+          flush=True)
+    result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
+                            selection=dg.AssetSelection.assets(*selection), instance=instance,
+                            run_config=QUIET_RUN_CONFIG, raise_on_error=False)
+    if not result.success:
+        print("humancal: training failed; the lifter in force is unchanged (see the log above)", file=sys.stderr)
+        return 1
+    _print_active_lifter()
+    print("`humancal update` now re-lifts every sequence with it (`humancal train lifter --discard` goes back to "
+          "the shipped weights)")
+    return 0
+
+
 CAMERA_ASSETS = {"extrinsics": "estimated", "gt_cameras": "ground-truth"}
 """Stored camera tables ``export cameras`` knows by what they are; ``extrinsics`` is the default."""
 
@@ -238,7 +311,9 @@ def cmd_ui(args) -> int:
     home = dagster_home()
     env = dict(os.environ, DAGSTER_HOME=str(home))
     repo = Path(__file__).resolve().parent.parent
-    argv = ["dagster", "dev", "-m", "pipelines.definitions", "-h", "127.0.0.1", "-p", str(args.port)]
+    # The Dagster of this interpreter's environment, whether or not that environment is activated (a bare
+    # `dagster` would be looked up on PATH, and may be missing or another installation).
+    argv = [sys.executable, "-m", "dagster", "dev", "-m", "pipelines.definitions", "-h", "127.0.0.1", "-p", str(args.port)]
     # A process started in the background by a non-interactive shell inherits SIGINT as ignored, and
     # dagster maps SIGTERM onto its SIGINT handler: restore the defaults so Ctrl-C and `kill` stop it.
     signal.signal(signal.SIGINT, signal.SIG_DFL)
@@ -272,6 +347,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="export the dataset's ground-truth cameras (gt_cameras) instead of the estimated ones")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_export)
+    p = sub.add_parser("train", help="train a model here on the data root's mocap (it then replaces the shipped one)")
+    p.add_argument("model", choices=("lifter",))
+    p.add_argument("--seed", type=int, help="training seed (default: the shipped configuration's)")
+    p.add_argument("--epochs", type=int, help="training epochs (default: the shipped configuration's)")
+    p.add_argument("--discard", action="store_true", help="delete the trained model: the shipped one is in force again")
+    p.set_defaults(func=cmd_train)
     from pipelines.capture_cli import add_parser as add_capture_command  # humancal add NAME --openpose ...
     add_capture_command(sub)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")

@@ -34,8 +34,10 @@ def test_report_prints_stored_tables_as_csv(tmp_path, monkeypatch, capsys):
     assert main(["report", "--partition", "d__s", "--format", "csv"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0] == "dataset,sequence,method,metric,view,value,unit" and out[1] == "d,s,m,mpjpe_mm,,12.5,mm"
-    with pytest.raises(SystemExit, match="no metric table stored"):
+    with pytest.raises(SystemExit, match=r"unknown partition\(s\) x__y; known here: .*synthetic__demo"):
         main(["report", "--partition", "x__y"])
+    with pytest.raises(SystemExit, match=r"no metric table stored yet .*`humancal update --partition synthetic__tiny`"):
+        main(["report", "--partition", "synthetic__tiny"])
 
 
 def test_report_headline_leaves_out_per_view_and_suffixed_rows(tmp_path, monkeypatch, capsys):
@@ -79,11 +81,25 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def test_ui_runs_the_dagster_of_its_own_interpreter(tmp_path, monkeypatch):
+    """Without an activated environment `dagster` is not on PATH: the UI must not look it up there."""
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    calls = []
+    monkeypatch.setattr(os, "execvpe", lambda file, argv, env: calls.append((file, argv, env)))
+    monkeypatch.setattr(os, "chdir", lambda path: None)
+    monkeypatch.setattr(signal, "signal", lambda *a: None)
+    main(["ui", "--port", "3999"])
+    (file, argv, env), = calls
+    assert file == sys.executable and argv[:4] == [sys.executable, "-m", "dagster", "dev"]
+    assert argv[-2:] == ["-p", "3999"] and env["DAGSTER_HOME"] == str(tmp_path / "dagster_home")
+
+
 @pytest.mark.slow
 def test_ui_starts_and_stops_on_sigterm(tmp_path):
     port = _free_port()
-    env = dict(os.environ, HUMANCAL_STATE_DIR=str(tmp_path))
-    # Started the way CI starts background jobs: SIGINT ignored, no terminal.
+    # Started the way CI starts background jobs: SIGINT ignored, no terminal; and without the environment on PATH.
+    env = dict(os.environ, HUMANCAL_STATE_DIR=str(tmp_path), PATH="/usr/bin:/bin")
     proc = subprocess.Popen([sys.executable, "-m", "pipelines.cli", "ui", "--port", str(port)], cwd=REPO, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
