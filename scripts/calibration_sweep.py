@@ -22,12 +22,17 @@ With the lifter, the sweep also reports the lifted poses' quality against the gr
 the fraction of detections lifted, the fraction scoring as upright, and the height error (bias and mean absolute
 error) over all lifted detections of known people and over the upright ones.
 
+``--extrinsics FIELD=V1,V2,...`` runs every value of one ``ExtrinsicsConfig`` field on each scene (generated and
+lifted once) and summarises each value: how the library's defaults are chosen, on these synthetic scenes only.
+With ``--shelf`` it takes a single value: Shelf is measured, never used to choose.
+
 Usage::
 
     python scripts/calibration_sweep.py --scenes 30 --out .humancal/sweeps/calibration
     python scripts/calibration_sweep.py --scenes 0 --shelf      # Shelf only
     python scripts/calibration_sweep.py --scenes 30 --shelf --lifter .humancal/artifacts/lifter_checkpoint.pt \
         --out .humancal/sweeps/calibration_lifter
+    python scripts/calibration_sweep.py --scenes 30 --lifter shipped --extrinsics shape_std_m=0.05,0.1,0.2
 """
 
 from __future__ import annotations
@@ -301,7 +306,7 @@ def main() -> None:
     parser.add_argument("--plumb-top", default="shoulders", help="IntrinsicsConfig.plumb_top")
     parser.add_argument("--lifted", choices=("stand-in", "lifter"), default=None,
                         help="source of the lifted poses (default: 'lifter' when --lifter is given, else 'stand-in')")
-    parser.add_argument("--lifter", type=Path, default=None, help="learned lifter checkpoint (humancal.lifter)")
+    parser.add_argument("--lifter", type=Path, default=None, help="learned lifter checkpoint (humancal.lifter), or 'shipped' for the packaged weights")
     parser.add_argument("--out", type=Path, default=None, help="folder for per-view CSVs, summary JSON, plots")
     parser.add_argument("--extrinsics", default=None, metavar="FIELD=V1[,V2...]",
                         help="ExtrinsicsConfig field and values to compare on the synthetic scenes (e.g. "
