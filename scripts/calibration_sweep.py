@@ -306,7 +306,8 @@ def main() -> None:
     parser.add_argument("--plumb-top", default="shoulders", help="IntrinsicsConfig.plumb_top")
     parser.add_argument("--lifted", choices=("stand-in", "lifter"), default=None,
                         help="source of the lifted poses (default: 'lifter' when --lifter is given, else 'stand-in')")
-    parser.add_argument("--lifter", type=Path, default=None, help="learned lifter checkpoint (humancal.lifter), or 'shipped' for the packaged weights")
+    parser.add_argument("--lifter", type=Path, default=None,
+                        help="learned lifter checkpoint (humancal.lifter), or 'shipped' for the packaged weights")
     parser.add_argument("--out", type=Path, default=None, help="folder for per-view CSVs, summary JSON, plots")
     parser.add_argument("--extrinsics", default=None, metavar="FIELD=V1[,V2...]",
                         help="ExtrinsicsConfig field and values to compare on the synthetic scenes (e.g. "
