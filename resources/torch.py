@@ -23,8 +23,8 @@ class TorchResource(dg.ConfigurableResource):
     device: str = Field(default="cpu", description="torch device the networks run on: 'cpu', 'cuda', 'cuda:1', ...")
     threads: int = Field(
         default=1,
-        description="torch intra-op threads (on a 2-core machine shared with other work, 1 thread lifted as fast as 2 "
-                    "and trained faster)",
+        description="torch intra-op threads (on a 2-core machine shared with other work, one thread lifted about 1.5 "
+                    "times faster than two)",
     )
     seed: int = Field(default=0, description="seed of torch's global generator while an asset runs")
 
