@@ -122,7 +122,8 @@ def sorted_views(table: pd.DataFrame, name: str) -> pd.DataFrame:
     rows = table.sort_values("view")
     views = rows["view"].to_numpy()
     if not np.array_equal(views, np.arange(len(views))):
-        raise ValueError(f"{name}: column 'view' must hold 0..{len(views) - 1} once each, got {views.tolist()}")
+        raise ValueError(f"{name}: column 'view' must hold 0..V-1 (here 0..{len(views) - 1}) once each, got "
+                         f"{views.tolist()}")
     return rows
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from humancal.calibration.intrinsics import IntrinsicsEstimate
+from humancal.camera import intrinsic_matrices, sorted_views
 
 __all__ = ["intrinsics_to_table", "intrinsics_from_table"]
 
@@ -48,13 +49,10 @@ def intrinsics_from_table(table: pd.DataFrame) -> list[IntrinsicsEstimate]:
     Raises:
         ValueError: the views are not 0..V-1, each once.
     """
-    rows = table.sort_values("view")
-    views = rows["view"].to_numpy()
-    if not np.array_equal(views, np.arange(len(rows))):
-        raise ValueError(f"intrinsics: column 'view' must hold 0..V-1 once each, got {views.tolist()}")
+    rows = sorted_views(table, "intrinsics")
+    Ks = intrinsic_matrices(rows["fx_px"], rows["fy_px"], rows["cx_px"], rows["cy_px"])
     out = []
-    for r in rows.itertuples(index=False):
-        K = np.array([[r.fx_px, 0.0, r.cx_px], [0.0, r.fy_px, r.cy_px], [0.0, 0.0, 1.0]])
+    for K, r in zip(Ks, rows.itertuples(index=False)):
         out.append(IntrinsicsEstimate(
             view=int(r.view), K=K, width_px=int(r.width_px), height_px=int(r.height_px), status=str(r.status),
             focal_rel_uncertainty=float(r.focal_rel_uncertainty), num_candidates=int(r.num_candidates),

@@ -13,11 +13,10 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def ring_scene(body_model):
-    """3 people, 4 views on a ring, 60 frames, default detector noise."""
     from humancal.synthetic import generate_scene, preset
 
-    return generate_scene(preset("demo", num_people=3, num_views=4, num_frames=60, seed=11), body_model,
-                          sequence="ring")
+    scene_config = preset("demo", num_people=3, num_views=3, num_frames=45, seed=5)
+    return generate_scene(scene_config, body_model, sequence="oracle")
 
 
 @pytest.fixture(scope="module")

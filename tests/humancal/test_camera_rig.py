@@ -61,7 +61,7 @@ def test_rig_projection_matches_the_single_camera_one():
 
 def test_bad_tables_and_shapes_are_named():
     table = cameras_to_table(_cameras(), "s__x")
-    with pytest.raises(ValueError, match=r"views? .*0\.\.2|'view' must hold 0\.\.2"):
+    with pytest.raises(ValueError, match=r"'view' must hold 0\.\.V-1 \(here 0\.\.2\)"):
         CameraRig.from_table(table.assign(view=[0, 1, 3]))
     with pytest.raises(ValueError, match=r"CameraRig.distortion must have shape \(V, 5\)"):
         rig = CameraRig.from_cameras(_cameras())
