@@ -293,13 +293,14 @@ def _calibrate_and_compare(key: str, add_args: list[str], tmp_path: Path, monkey
     return read_cameras(out, "pose2sim")
 
 
-def _assert_close_to_truth(estimated, truth, label: str) -> dict:
+def _assert_close_to_truth(estimated, truth, label: str, capsys) -> dict:
     from evaluation.camera_metrics import camera_errors
 
     err = camera_errors(estimated, truth)
     figures = {name: (float(np.mean(err[name])), float(np.max(err[name])))
                for name in ("focal_error_pct", "angle_error_deg", "position_error_mm")}
-    print(f"{label}: " + ", ".join(f"{k} mean {m:.2f} max {x:.2f}" for k, (m, x) in figures.items()))
+    with capsys.disabled():  # the figures, for the record (pytest -s)
+        print(f"\n{label}: " + ", ".join(f"{k} mean {m:.2f} max {x:.2f}" for k, (m, x) in figures.items()))
     assert len(estimated) == len(truth)
     assert figures["focal_error_pct"][1] < 5.0
     assert figures["angle_error_deg"][1] < 2.0
@@ -312,7 +313,7 @@ def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state
     args = ["--openpose", *map(str, folders.values()), "--image-size", "1920x1080", "--skeleton", "body25",
             "--cameras", str(tmp_path / "capture" / "calib.toml")]
     estimated = _calibrate_and_compare("oplab__capture", args, tmp_path, monkeypatch, capsys)
-    _assert_close_to_truth(estimated, truth, "openpose capture")
+    _assert_close_to_truth(estimated, truth, "openpose capture", capsys)
     assert main(["report", "--partition", "oplab__capture", "--format", "csv"]) == 0
     report = capsys.readouterr().out
     assert "focal_error_pct" in report and "mpjpe" not in report  # known cameras: camera rows; no identities
@@ -324,4 +325,4 @@ def test_coco_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, mo
     _, files, truth = _write_synthetic_capture(tmp_path / "capture", body_model)
     args = ["--coco", *map(str, files), "--image-size", "1920x1080"]
     estimated = _calibrate_and_compare("cocolab__capture", args, tmp_path, monkeypatch, capsys)
-    _assert_close_to_truth(estimated, truth, "coco capture")
+    _assert_close_to_truth(estimated, truth, "coco capture", capsys)
