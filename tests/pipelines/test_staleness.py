@@ -5,6 +5,7 @@ If a Dagster upgrade moves the private names ``pipelines.staleness`` imports, th
 
 import dagster as dg
 import pandas as pd
+import pytest
 
 from pipelines.staleness import Freshness, StalenessView, io_manager_key
 
@@ -27,6 +28,7 @@ def _run(defs: dg.Definitions, instance, *names: str) -> None:
     assert dg.materialize(list(defs.assets), resources=defs.resources, instance=instance, selection=selection).success
 
 
+@pytest.mark.filterwarnings("ignore::dagster.BetaWarning")
 def test_missing_then_fresh_then_stale_with_a_cause():
     instance = dg.DagsterInstance.ephemeral()
     defs = _defs()
