@@ -22,6 +22,7 @@ from humancal.lifter import (
     train_lifter,
 )
 from humancal.retarget import motions_table_to_clips
+from resources.io_managers import checkpoint_content_version
 from resources.lifter_source import active_lifter
 from resources.torch import TorchResource
 
@@ -104,7 +105,7 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
             picture = png_metadata(png, "training history")
         return versioned_output(
             checkpoint,
-            checkpoint_digest(checkpoint)[:16],
+            checkpoint_content_version(checkpoint),
             training_time_s=round(float(checkpoint["training_time_s"]), 1),
             checkpoint_mb=round(checkpoint_num_bytes(checkpoint) / 1e6, 2),
             val_mpjpe_mm=round(final["mpjpe_mm"], 2),
@@ -136,7 +137,7 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
         metrics = checkpoint.get("val_metrics", {})
         return versioned_output(
             checkpoint,
-            digest[:16],
+            checkpoint_content_version(checkpoint),
             source=active.source,
             path=str(active.path),
             description=active.describe(),
