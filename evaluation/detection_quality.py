@@ -45,13 +45,8 @@ class GroupingEvaluation:
     """Per-item results of :func:`evaluate_grouping` and the metrics table built from them.
 
     Attributes:
-        person_views: one row per (sequence, frame, view, person_id) of a projected ground-truth person with columns
-            ``counted`` (bool, the person-view counts for recall), ``visible_joints``, ``det_id`` (matched detection,
-            -1 if none), ``mean_error_px`` (NaN if unmatched).
-        detections: one row per (sequence, frame, view, det_id) with ``matched_person`` (-1 if none),
-            ``nearest_person`` (the closest ground-truth person among those it is close to, -1 if none) and
-            ``fragment`` (close to some person but unmatched).
-        joint_errors_px: one row per (sequence, frame, view, det_id, joint) of the matched pairs' common joints.
+        person_views, detections, joint_errors_px: the matching of the detections to the projected ground truth,
+            as in :class:`humancal.datasets.gt_matching.GroundTruthMatch`.
         metrics: canonical ``metrics`` table.
     """
 
