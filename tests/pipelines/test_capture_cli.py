@@ -11,21 +11,6 @@ import yaml
 from humancal.formats.skeletons import SKELETONS
 from pipelines.cli import main
 
-REPO = Path(__file__).resolve().parents[2]
-SHIPPED_LIFTER = REPO / "humancal" / "weights" / "lifter.json"
-
-
-def _shipped_lifter_trained() -> bool:
-    """The shipped lifter weights exist and are the real ones (a short placeholder training says so in its sidecar)."""
-    if not SHIPPED_LIFTER.exists():
-        return False
-    return "PLACEHOLDER" not in str(json.loads(SHIPPED_LIFTER.read_text()).get("trained_with", "")).upper()
-
-
-NEEDS_LIFTER = pytest.mark.skipif(
-    not _shipped_lifter_trained(),
-    reason="needs the trained shipped lifter weights (humancal/weights/lifter.json says placeholder or is missing)",
-)
 BODY25 = SKELETONS["body25"]
 
 
@@ -307,7 +292,6 @@ def _assert_close_to_truth(estimated, truth, label: str, capsys) -> dict:
     return figures
 
 
-@NEEDS_LIFTER
 def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, monkeypatch, capsys, body_model):
     folders, _, truth = _write_synthetic_capture(tmp_path / "capture", body_model)
     args = ["--openpose", *map(str, folders.values()), "--image-size", "1920x1080", "--skeleton", "body25",
@@ -320,7 +304,6 @@ def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state
 
 
 @pytest.mark.slow
-@NEEDS_LIFTER
 def test_coco_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, monkeypatch, capsys, body_model):
     _, files, truth = _write_synthetic_capture(tmp_path / "capture", body_model)
     args = ["--coco", *map(str, files), "--image-size", "1920x1080"]
