@@ -116,6 +116,7 @@ class ExtrinsicsSettings(dg.Config):
     align_floor: bool = library_field(_E, "align_floor")
     upright_threshold: float = library_field(_E, "upright_threshold")
     seed: int = library_field(_E, "seed")
+    fov_range_deg: list[float] = library_field(_E, "fov_range_deg")
 
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""

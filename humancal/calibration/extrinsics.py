@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -30,7 +31,7 @@ import pandas as pd
 from humancal.calibration.floor import FloorAlignment, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.matching import groups_from_pairs
-from humancal.calibration.multiview_focal import bundle_adjust
+from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
 from humancal.calibration.translations import resect_focal_translation, root_positions, solve_focals_translations
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted
@@ -70,6 +71,8 @@ class ExtrinsicsConfig:
         upright_threshold: groups whose reconstructed keypoints score at least this as standing
             (:func:`~humancal.lifter.standing_score`) count as standing for the floor.
         seed: randomness of the subsampling.
+        fov_range_deg: plausible horizontal field of view (narrowest, widest), degrees: bounds every focal in the
+            bundle adjustment (by its parameterization) and the focal a resection may start a view from.
     """
 
     rotation_threshold_deg: float = 10.0
@@ -90,6 +93,7 @@ class ExtrinsicsConfig:
     align_floor: bool = True
     upright_threshold: float = 0.5
     seed: int = 0
+    fov_range_deg: tuple[float, float] = (10.0, 140.0)
 
     def __post_init__(self) -> None:
         if not 0.0 < self.rotation_threshold_deg < 90.0:
@@ -98,6 +102,9 @@ class ExtrinsicsConfig:
             raise ValueError(f"ExtrinsicsConfig.max_groups={self.max_groups} must be >= 3")
         if not 0.0 < self.focal_range_rel[0] < self.focal_range_rel[1]:
             raise ValueError(f"ExtrinsicsConfig.focal_range_rel={self.focal_range_rel} must be 0 < low < high")
+        if not 0.0 < self.fov_range_deg[0] < self.fov_range_deg[1] < 180.0:
+            raise ValueError(f"ExtrinsicsConfig.fov_range_deg={self.fov_range_deg} must be 0 < narrowest < widest "
+                             "< 180 degrees")
 
     def replace(self, **changes) -> ExtrinsicsConfig:
         """A validated copy with some fields changed."""
@@ -112,9 +119,13 @@ class ExtrinsicsDiagnostics:
         per_view: one row per view: ``view``, ``focal_single_view_px``, ``single_view_status``,
             ``focal_linear_px``, ``focal_px`` (final), ``focal_rel_std`` (final), ``focal_status`` (``"ok"`` or
             ``"poorly_constrained"``), ``focal_source`` (how the bundle adjustment was started:
-            ``"single_view+bundle"`` (a well-conditioned single-view focal, also its prior), ``"linear+bundle"``
-            or ``"resection+bundle"`` (recovered from the other views)),
-            ``reprojection_rms_px``, ``rotation_edges``.
+            ``"single_view+bundle"`` (a well-conditioned single-view focal, also its prior), ``"linear+bundle"``,
+            ``"resection+bundle"`` (recovered from the people placed by the other views) or
+            ``"other_views+bundle"`` (neither the linear solve nor a resection gave a plausible focal: started
+            from the other views' median field of view, left to the bundle adjustment)),
+            ``bundle_status`` (``"ok"``, ``"focal_at_bound"``, ``"behind_camera"``, ``"no_inliers"``: see
+            :class:`~humancal.calibration.multiview_focal.BundleResult`; anything but ``"ok"`` makes the
+            ``focal_status`` ``"poorly_constrained"``), ``reprojection_rms_px``, ``rotation_edges``.
         pairs: one row per view pair: ``view_a``, ``view_b``, ``support``, ``residual_deg`` (disagreement of the
             pair rotation with the averaged rotations; NaN when unused).
         groups: the matched detections used: ``frame``, ``view``, ``det_id``, ``group``.
@@ -176,18 +187,21 @@ def _initial_focals(intrinsics, config):
     return f, np.where(ok, rel, np.inf), diag
 
 
-def _resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, diag, config):
-    """Re-estimate every view's focal and translation from the people placed by the other views.
+def _resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, bounds, views):
+    """Re-estimate the focal and translation of ``views`` from the people placed by the other views.
+
+    A resection is accepted only when its focal lies within the plausible ``bounds`` ((V, 2), pixels) and it and
+    the translation are finite (``accepted``); the other views keep ``f`` and ``t``.
 
     The linear solve sees a view's focal only through the spread of its people's depths, which vanishes for a
     camera looking straight down (all people at about the same depth) and is attenuated by depth noise;
     resection uses the perspective of the 3D keypoints instead.
     """
-    V = len(f)
     view = detections.view
     Rt = np.transpose(R, (0, 2, 1))
     f_new, t_new = f.copy(), t.copy()
-    for v in range(V):
+    accepted = np.zeros(len(f), bool)
+    for v in views:
         X, x, w = [], [], []
         for g in groups:
             mine = g[view[g] == v]
@@ -203,10 +217,10 @@ def _resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, diag, conf
         if len(X) < 3:
             continue
         fv, tv, _ = resect_focal_translation(np.concatenate(X), np.concatenate(x), np.concatenate(w), R[v], pp[v])
-        lo, hi = config.focal_range_rel[0] * diag[v], config.focal_range_rel[1] * diag[v]
-        if np.isfinite(fv) and lo <= fv <= hi and np.isfinite(tv).all():
+        if np.isfinite(fv) and bounds[v, 0] <= fv <= bounds[v, 1] and np.isfinite(tv).all():
             f_new[v], t_new[v] = fv, tv
-    return f_new, t_new
+            accepted[v] = True
+    return f_new, t_new, accepted
 
 
 def _rotations(detections, lifted, V, rng, config):
@@ -227,7 +241,11 @@ def _rotations(detections, lifted, V, rng, config):
 
 
 def _linear(detections, lifted, rows_a, rows_b, R, f0, prior_rel, pp, diag, config):
-    """Alternate root positions and the linear focal + translation solve until the focal lengths settle."""
+    """Alternate root positions and the linear focal + translation solve until the focal lengths settle.
+
+    Returns the focal lengths, the last solution, the roots at those focal lengths and the views whose focal the
+    last solve left non-positive or non-finite.
+    """
     # every view keeps a weak prior so that an unobservable focal stays finite (100 % std)
     lin_prior_rel = np.where(np.isfinite(prior_rel), prior_rel, 1.0)
     f = f0.copy()
@@ -235,14 +253,72 @@ def _linear(detections, lifted, rows_a, rows_b, R, f0, prior_rel, pp, diag, conf
         roots = root_positions(detections, lifted, _K(f, f, pp))
         sol = solve_focals_translations(roots, detections.view, rows_a, rows_b, R, f0, lin_prior_rel,
                                         person_scale_std=config.person_scale_std)
-        # the roots were computed at f: move at most by a factor 2 per pass (the linearisation is local)
-        step = np.clip(np.nan_to_num(sol.focal_px / f, nan=1.0, posinf=2.0, neginf=0.5), 0.5, 2.0)
+        # the roots were computed at f: move at most by a factor 2 per pass (the linearisation is local); a
+        # non-positive or non-finite focal says the pairs do not determine that view (not "smaller"): it stays
+        undetermined = ~(np.isfinite(sol.focal_px) & (sol.focal_px > 0))
+        step = np.where(undetermined, 1.0, np.clip(np.nan_to_num(sol.focal_px / f, nan=1.0), 0.5, 2.0))
         f_new = np.clip(f * step, config.focal_range_rel[0] * diag, config.focal_range_rel[1] * diag)
         converged = np.max(np.abs(np.log(f_new / f))) < 0.005
         f = f_new
         if converged:
             break
-    return f, sol, root_positions(detections, lifted, _K(f, f, pp))
+    return f, sol, root_positions(detections, lifted, _K(f, f, pp)), undetermined
+
+
+def _blind_views(f, sol, undetermined, bounds, diag, config) -> np.ndarray:
+    """Views whose linear focal is no estimate: non-positive or non-finite in the last solve, at an end of the
+    linear range (a clamp), outside the plausible field of view, or with a large data-only std."""
+    lo, hi = config.focal_range_rel[0] * diag, config.focal_range_rel[1] * diag
+    with np.errstate(invalid="ignore"):
+        return (undetermined | ~np.isfinite(sol.focal_rel_std_data) | (sol.focal_rel_std_data > config.linear_max_rel_std)
+                | (f <= lo * 1.01) | (f >= hi * 0.99) | (f < bounds[:, 0]) | (f > bounds[:, 1]))
+
+
+def _other_views_focal(f, blind, widths, f0, bounds) -> np.ndarray:
+    """(V,) starting focal of every view from the median field of view (focal over image width) of the views that
+    are not ``blind``; without any, the initial (single-view or typical) focal; inside the plausible bounds."""
+    if (~blind).any():
+        start = float(np.median(f[~blind] / widths[~blind])) * widths
+    else:
+        start = f0.astype(float)
+    return np.clip(start, bounds[:, 0], bounds[:, 1])
+
+
+def _translations_from_others(groups, detections, lifted, roots_T, R, t, views) -> np.ndarray:
+    """(V, 3) translations of ``views`` that put their people's roots (at their current focal) where the other
+    views place them: per view the median over groups of ``T_cam - R X_root``; the other rows keep ``t``."""
+    view = detections.view
+    Rt = np.transpose(R, (0, 2, 1))
+    t_new = t.copy()
+    for v in views:
+        offsets = []
+        for g in groups:
+            mine, others = g[view[g] == v], g[view[g] != v]
+            if len(mine) != 1 or len(others) == 0 or not np.isfinite(roots_T[mine[0]]).all():
+                continue
+            world = [Rt[view[o]] @ (roots_T[o] - t[view[o]]) for o in others if np.isfinite(roots_T[o]).all()]
+            if world:
+                offsets.append(roots_T[mine[0]] - R[v] @ np.mean(world, axis=0))
+        if offsets:
+            t_new[v] = np.median(offsets, axis=0)
+    return t_new
+
+
+@contextmanager
+def _stage(name: str) -> Iterator[None]:
+    """Numerical failures of a step (a singular system, a floating-point error) become a :class:`CalibrationError`
+    naming the step."""
+    try:
+        yield
+    except (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError) as error:
+        raise CalibrationError(f"extrinsics, {name}: numerical failure ({type(error).__name__}: {error})") from error
+
+
+def _require_finite(values: np.ndarray, stage: str) -> None:
+    """Raise :class:`CalibrationError` naming the views whose row of ``values`` ((V, ...)) is not finite."""
+    bad = np.flatnonzero(~np.isfinite(np.asarray(values, dtype=np.float64).reshape(len(values), -1)).all(1))
+    if len(bad):
+        raise CalibrationError(f"extrinsics, {stage}: views {bad.tolist()} have non-finite parameters")
 
 
 def _pick_groups(groups, detections, max_groups, rng):
@@ -297,48 +373,70 @@ def estimate_extrinsics(
 
     f0, prior_rel, diag = _initial_focals(intrinsics, config)
     pp = np.array([e.K[:2, 2] for e in intrinsics])
+    widths = np.array([float(e.width_px) for e in intrinsics])
+    bounds = focal_bounds_from_fov(widths, config.fov_range_deg)
     # crop-frame poses (the lifter's) turn into camera frames by an angle that depends on the focal: convert
     # with the initial focal lengths, and once more with the linear solution if it moved them noticeably
     f_frame = f0.copy()
     lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
     for attempt in range(2 if lifted.frame == "crop" else 1):
         clock = time.perf_counter()
-        R, residual_deg, pairs, rows_a, rows_b = _rotations(detections, lifted_cam, V, rng, config)
+        with _stage("rotations"):
+            R, residual_deg, pairs, rows_a, rows_b = _rotations(detections, lifted_cam, V, rng, config)
+        _require_finite(R.reshape(V, -1), "rotations")
         timings["rotations"] = timings.get("rotations", 0.0) + time.perf_counter() - clock
         clock = time.perf_counter()
-        f, sol, roots = _linear(detections, lifted_cam, rows_a, rows_b, R, f0, prior_rel, pp, diag, config)
+        with _stage("linear focal and translation solve"):
+            f, sol, roots, undetermined = _linear(detections, lifted_cam, rows_a, rows_b, R, f0, prior_rel, pp, diag,
+                                                  config)
         timings["linear"] = timings.get("linear", 0.0) + time.perf_counter() - clock
+        f_linear = f.copy()
+        # views the linear solve cannot see (a non-positive focal, one at the end of the range or outside the
+        # plausible field of view, or a large data-only std) must not start anything from that value (it is a
+        # clamp, not an estimate): they start from the other views' field of view, then a resection
+        blind = _blind_views(f, sol, undetermined, bounds, diag, config)
+        f = np.where(blind, _other_views_focal(f, blind, widths, f0, bounds), f)
         if lifted.frame != "crop" or np.max(np.abs(np.log(f / f_frame))) < 0.05 or attempt == 1:
             break
         f_frame = f.copy()
         lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
     lifted = lifted_cam
-    f_linear = f.copy()
 
     clock = time.perf_counter()
     groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections))
     if len(groups) < 3:
         raise CalibrationError(f"only {len(groups)} people could be matched across views: cannot refine the cameras")
     groups = _pick_groups(groups, detections, config.max_groups, rng)
-    # views the linear solve cannot see (focal at the end of the range, or a large data-only std): resection
-    lo, hi = config.focal_range_rel[0] * diag, config.focal_range_rel[1] * diag
-    blind = (sol.focal_rel_std_data > config.linear_max_rel_std) | (f <= lo * 1.01) | (f >= hi * 0.99)
     t_init = sol.t_cam_from_world_m.copy()
+    resected = np.zeros(V, bool)
     if blind.any():
-        f_res, t_res = _resection_pass(groups, detections, lifted, np.nan_to_num(roots.T_cam_m), R, t_init, f, pp,
-                                       diag, config)
-        logger.info("views %s: focal from resection %s instead of the linear %s", np.flatnonzero(blind).tolist(),
-                    np.round(f_res[blind]).tolist(), np.round(f[blind]).tolist())
-        f = np.where(blind, f_res, f)
-        t_init[blind] = t_res[blind]
+        with _stage("resection"):
+            f_res, t_res, resected = _resection_pass(groups, detections, lifted, np.nan_to_num(roots.T_cam_m), R,
+                                                     t_init, f, pp, bounds, np.flatnonzero(blind))
+            f = np.where(resected, f_res, f)
+            t_init[resected] = t_res[resected]
+            # the rest keep the other views' field of view: their translation from the people those views place
+            others = blind & ~resected
+            if others.any():
+                roots_f = root_positions(detections, lifted, _K(f, f, pp))
+                t_init[others] = _translations_from_others(groups, detections, lifted, roots_f.T_cam_m, R, t_init,
+                                                           np.flatnonzero(others))[others]
+        logger.info("views %s: the linear focal %s is not an estimate (data-only std %s); started from %s px (%s)",
+                    np.flatnonzero(blind).tolist(), np.round(f_linear[blind]).tolist(),
+                    np.round(sol.focal_rel_std_data[blind], 3).tolist(), np.round(f[blind]).tolist(),
+                    ["resection" if r else "other views' field of view" for r in resected[blind]])
     logger.info("linear focal std (data only) %s", np.round(sol.focal_rel_std_data, 3).tolist())
+    _require_finite(t_init, "translations before the bundle adjustment")
     points = _initial_points(groups, lifted, np.nan_to_num(roots.T_cam_m), detections.view, R, t_init)
-    ba = bundle_adjust(
-        detections, lifted, groups, points, f, f, pp, R, t_init,
-        square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
-        shape_std_m=config.shape_std_m, group_scale_std=config.person_scale_std,
-        max_iterations=config.bundle_iterations,
-    )
+    with _stage("bundle adjustment"):
+        ba = bundle_adjust(
+            detections, lifted, groups, points, f, f, pp, R, t_init,
+            square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
+            shape_std_m=config.shape_std_m, group_scale_std=config.person_scale_std, focal_bounds_px=bounds,
+            max_iterations=config.bundle_iterations,
+        )
+    _require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
+                    "bundle adjustment")
     timings["bundle"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
@@ -347,8 +445,11 @@ def estimate_extrinsics(
     if config.align_floor:
         # standing from the reconstructed (triangulated) keypoints: body-internal, camera-free
         standing = standing_score(ba.points_world_m)
-        floor = align_to_floor(ba.points_world_m, standing, R_final[0], upright_threshold=config.upright_threshold)
-        R_final, t_final = floor.apply_to_camera(R_final, t_final)
+        with _stage("floor alignment"):
+            floor = align_to_floor(ba.points_world_m, standing, R_final[0],
+                                   upright_threshold=config.upright_threshold)
+            R_final, t_final = floor.apply_to_camera(R_final, t_final)
+        _require_finite(np.c_[R_final.reshape(V, -1), t_final], "floor alignment")
     timings["floor"] = time.perf_counter() - clock
 
     cameras = [
@@ -366,9 +467,12 @@ def estimate_extrinsics(
         "focal_linear_px": f_linear,
         "focal_px": ba.fx_px,
         "focal_rel_std": ba.focal_rel_std,
-        "focal_status": np.where(ba.focal_rel_std <= config.max_focal_rel_std, "ok", "poorly_constrained"),
+        "focal_status": np.where((ba.focal_rel_std <= config.max_focal_rel_std) & (ba.view_status == "ok"), "ok",
+                                 "poorly_constrained"),
         "focal_source": np.where([e.status == "ok" for e in intrinsics], "single_view+bundle",
-                                 np.where(blind, "resection+bundle", "linear+bundle")),
+                                 np.where(resected, "resection+bundle",
+                                          np.where(blind, "other_views+bundle", "linear+bundle"))),
+        "bundle_status": ba.view_status,
         "reprojection_rms_px": ba.reprojection_rms_px,
         "rotation_edges": edges,
     })

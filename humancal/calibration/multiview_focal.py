@@ -14,7 +14,20 @@ Residuals (all in units of their standard deviation):
 
 Reprojection and shape residuals are robustified with Huber weights (iteratively reweighted). The solver is
 Levenberg-Marquardt on the normal equations with the Schur complement over the per-group point blocks, so
-the cost grows linearly with the number of groups. Unlike the linear solve of :mod:`.translations`, the noisy
+the cost grows linearly with the number of groups (scipy's ``least_squares`` solves the reduced camera system
+with an iterative sparse solver that does not exploit the 70 x 70 point blocks: the direct Schur solve is kept).
+
+The solver cannot diverge:
+
+* each focal length is bounded by its parameterization, ``log f = m + h tanh(u)``, to a plausible horizontal
+  field of view (10-140 degrees by default, ``focal_bounds_px`` otherwise): a focal never runs off to 1e12 px
+  when a view's observations pull it towards an affine camera, it stops at the bound (``"focal_at_bound"``);
+* a step is only taken when it lowers the cost and every parameter and the cost are finite (a singular or
+  non-finite system, or a cost increase, raises the damping and retries from the last good state; after ten
+  refusals the last good state is the result);
+* the inputs are checked first (non-finite starting cameras raise :class:`CalibrationError` naming the view;
+  joints of non-finite lifted poses or keypoints are left out of their residuals);
+* every view ends with a status (:attr:`BundleResult.view_status`). Unlike the linear solve of :mod:`.translations`, the noisy
 measurements (2D keypoints, lifted poses) are residuals here, not regressors, so the focal lengths are not
 biased by errors in variables.
 """
@@ -26,12 +39,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from humancal.calibration.types import CalibrationError
 from humancal.lifter.lifted import LiftedPoses
 from humancal.detections import DenseDetections
 from humancal.geometry.rotations import rotvec_to_rotmat
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
 
-__all__ = ["BundleResult", "bundle_adjust"]
+__all__ = ["BundleResult", "bundle_adjust", "focal_bounds_from_fov"]
 
 logger = logging.getLogger(__name__)
 
@@ -54,6 +68,10 @@ class BundleResult:
         converged: whether the relative cost decrease fell under the tolerance.
         group_scale: (G,) size of each group's lifted poses relative to its keypoints (``q``; ones when the
             scales were not estimated).
+        view_status: (V,) per view ``"ok"``, ``"focal_at_bound"`` (the focal ended within 2 % of a bound of
+            its plausible range), ``"behind_camera"`` (most of its keypoints behind it) or ``"no_inliers"`` (no
+            keypoint within the Huber threshold).
+        rejected_steps: steps refused (cost increase, non-finite values or a singular system).
     """
 
     fx_px: np.ndarray
@@ -67,6 +85,28 @@ class BundleResult:
     iterations: int
     converged: bool
     group_scale: np.ndarray | None = None
+    view_status: np.ndarray | None = None
+    rejected_steps: int = 0
+
+
+def focal_bounds_from_fov(width_px: np.ndarray, fov_range_deg: tuple[float, float] = (10.0, 140.0)) -> np.ndarray:
+    """(V, 2) focal bounds (low, high) in pixels giving a horizontal field of view in ``fov_range_deg``.
+
+    Args:
+        width_px: (V,) image widths, pixels.
+        fov_range_deg: (narrowest, widest) horizontal field of view, degrees, in (0, 180).
+
+    Raises:
+        ValueError: the range is not ``0 < narrow < wide < 180`` or a width is not positive.
+    """
+    lo_deg, hi_deg = fov_range_deg
+    if not 0.0 < lo_deg < hi_deg < 180.0:
+        raise ValueError(f"fov_range_deg={fov_range_deg} must be 0 < narrowest < widest < 180 degrees")
+    w = np.asarray(width_px, dtype=np.float64)
+    if not (np.isfinite(w).all() and (w > 0).all()):
+        raise ValueError(f"width_px must be positive and finite, got {w}")
+    half = 0.5 * w
+    return np.stack([half / np.tan(np.radians(hi_deg) / 2), half / np.tan(np.radians(lo_deg) / 2)], -1)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -92,7 +132,10 @@ class _Problem:
     s_group: np.ndarray
     s_view: np.ndarray
     s_joints: np.ndarray  # (S, 23, 3)
-    shape_w: float
+    shape_w: np.ndarray  # (S, 23) 1 / std, 0 for joints without a finite lifted pose
+    # focal bounds: log f = log_f_mid + log_f_half * tanh(u)
+    log_f_mid: np.ndarray  # (V,)
+    log_f_half: np.ndarray  # (V,)
     # focal priors
     prior_log_f: np.ndarray  # (V,)
     prior_w: np.ndarray  # (V,), 0 for none
@@ -106,10 +149,23 @@ def _camera_params(p: _Problem) -> int:
     return (1 if p.square else 2) + 6
 
 
+def _log_focal(p: _Problem, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Log focal lengths from the bounded parameters ``u`` (V, nf), and ``d log f / d u``."""
+    th = np.tanh(u)
+    return p.log_f_mid[:, None] + p.log_f_half[:, None] * th, p.log_f_half[:, None] * (1.0 - th**2)
+
+
+def _focal_parameters(p: _Problem, log_f: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_log_focal`, starting values kept inside 90 % of the range (the gradient vanishes at the
+    bounds)."""
+    return np.arctanh(np.clip((log_f - p.log_f_mid[:, None]) / p.log_f_half[:, None], -0.9, 0.9))
+
+
 def _unpack(p: _Problem, cams: np.ndarray, R0: np.ndarray):
     nf = 1 if p.square else 2
-    fx = np.exp(cams[:, 0])
-    fy = fx if p.square else np.exp(cams[:, 1])
+    log_f, _ = _log_focal(p, cams[:, :nf])
+    fx = np.exp(log_f[:, 0])
+    fy = fx if p.square else np.exp(log_f[:, 1])
     R = rotvec_to_rotmat(cams[:, nf : nf + 3]) @ R0
     t = cams[:, nf + 3 : nf + 6]
     return fx, fy, R, t
@@ -119,15 +175,15 @@ def _residuals(p: _Problem, cams, R0, X, log_q):
     """Reprojection (O, 2), shape (S, 23, 3), focal prior (V,), scale prior (G,) residuals, all whitened."""
     fx, fy, R, t = _unpack(p, cams, R0)
     P = np.einsum("oij,oj->oi", R[p.o_view], X[p.o_group, p.o_joint]) + t[p.o_view]
-    z = P[:, 2]
+    z = np.where(P[:, 2] > 1e-6, P[:, 2], 1.0)
     proj = np.stack([fx[p.o_view] * P[:, 0] / z, fy[p.o_view] * P[:, 1] / z], -1)
     r_obs = (proj - p.o_px) * p.o_w[:, None]
-    r_obs[z <= 1e-6] = 1e3  # behind the camera
+    r_obs[P[:, 2] <= 1e-6] = 1e3  # behind the camera
     rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
     q = np.exp(log_q)[p.s_group, None, None]
-    r_shape = (q * (rel @ R[p.s_view].transpose(0, 2, 1)) - p.s_joints) * p.shape_w
+    r_shape = (q * (rel @ R[p.s_view].transpose(0, 2, 1)) - p.s_joints) * p.shape_w[..., None]
     nf = 1 if p.square else 2
-    r_prior = (cams[:, :nf].mean(1) - p.prior_log_f) * p.prior_w
+    r_prior = (_log_focal(p, cams[:, :nf])[0].mean(1) - p.prior_log_f) * p.prior_w
     r_scale = log_q * p.scale_w
     return r_obs, r_shape, r_prior, r_scale, (fx, fy, R, t, P)
 
@@ -164,13 +220,14 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
 
     # --- reprojection: d r / d P (2x3), then chain to camera and point parameters
     v, O = p.o_view, len(p.o_view)
-    z = P[:, 2]
+    behind = P[:, 2] <= 1e-6  # their residual is a constant penalty: no gradient
+    z = np.where(behind, 1.0, P[:, 2])
     dP = np.zeros((O, 2, 3))
     dP[:, 0, 0] = fx[v] / z
     dP[:, 0, 2] = -fx[v] * P[:, 0] / z**2
     dP[:, 1, 1] = fy[v] / z
     dP[:, 1, 2] = -fy[v] * P[:, 1] / z**2
-    scale = (p.o_w * np.sqrt(w_obs))[:, None, None]
+    scale = (np.where(behind, 0.0, p.o_w) * np.sqrt(w_obs))[:, None, None]
     dP *= scale
     Jc = np.zeros((O, 2, nc))
     if p.square:
@@ -179,6 +236,8 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     else:
         Jc[:, 0, 0] = fx[v] * P[:, 0] / z * scale[:, 0, 0]
         Jc[:, 1, 1] = fy[v] * P[:, 1] / z * scale[:, 0, 0]
+    _, dlogf = _log_focal(p, cams[:, :nf])  # (V, nf)
+    Jc[:, :, :nf] *= dlogf[v][:, None, :]
     RX = P - t[v]
     Jc[:, :, nf : nf + 3] = -dP @ _skew(RX)
     Jc[:, :, nf + 3 : nf + 6] = dP
@@ -257,7 +316,7 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     # --- focal priors
     for vv in range(p.V):
         if p.prior_w[vv] > 0:
-            jf = np.full(nf, p.prior_w[vv] / nf)
+            jf = p.prior_w[vv] / nf * dlogf[vv]
             Hcc[vv, :nf, :nf] += np.outer(jf, jf)
             gc[vv, :nf] += jf * r_prior[vv]
     # fixed camera parameters
@@ -307,6 +366,7 @@ def bundle_adjust(
     focal_prior_rel_std: np.ndarray | None = None,
     shape_std_m: float = 0.1,
     group_scale_std: float | None = None,
+    focal_bounds_px: np.ndarray | None = None,
     min_score: float = 0.2,
     huber: float = 2.5,
     max_iterations: int = 40,
@@ -329,69 +389,106 @@ def bundle_adjust(
             ``q`` (the lifter's error of that person's size, shared by its views), with the prior
             ``log q ~ N(0, group_scale_std^2)``: the metric scale of the scene is then the (geometric) mean of
             the lifted sizes and a single person's size error no longer pulls the cameras. None: ``q = 1``.
+        focal_bounds_px: (V, 2) low and high bound of every focal, pixels (None: a 10-140 degree horizontal
+            field of view of an image twice the principal point's x wide). Starting values near or outside
+            a bound start inside it (at 90 % of the way to it, in the bounded parameter).
         min_score: keypoints below this 2D confidence are not used.
         huber: Huber threshold in standard deviations.
         max_iterations: LM iterations.
         tolerance: stop when the relative cost decrease is below this.
 
     Returns:
-        :class:`BundleResult`.
+        :class:`BundleResult` (the last state that lowered the cost).
+
+    Raises:
+        CalibrationError: a starting camera, principal point or focal bound is not finite (naming the view),
+            or a group has no finite starting keypoint.
     """
     V, G = len(fx_px), len(groups)
     pp = np.asarray(principal_point_px, dtype=np.float64)
+    fx0, fy0 = np.asarray(fx_px, dtype=np.float64), np.asarray(fy_px, dtype=np.float64)
+    R_init = np.asarray(R_cam_from_world, dtype=np.float64)
+    t_init = np.asarray(t_cam_from_world_m, dtype=np.float64)
+    bounds = focal_bounds_from_fov(2.0 * pp[:, 0]) if focal_bounds_px is None else np.asarray(focal_bounds_px, float)
+    for name, values in (("focal", np.c_[fx0, fy0]), ("principal point", pp), ("focal bounds", bounds),
+                         ("rotation", R_init.reshape(V, -1)), ("translation", t_init)):
+        bad = np.flatnonzero(~np.isfinite(values).all(1) | ((values <= 0).any(1) if name == "focal" else False))
+        if len(bad):
+            raise CalibrationError(f"bundle adjustment: views {bad.tolist()} start with a non-finite or non-positive "
+                                   f"{name}")
+    if not (bounds[:, 0] < bounds[:, 1]).all():
+        raise CalibrationError(f"bundle adjustment: focal bounds must be low < high, got {bounds.tolist()}")
+    X = np.asarray(points_world_m, dtype=np.float64).copy()
+    finite_pts = np.isfinite(X).all(-1)
+    empty = np.flatnonzero(~finite_pts.any(1))
+    if len(empty):
+        raise CalibrationError(f"bundle adjustment: groups {empty.tolist()[:10]} have no finite starting keypoint")
+    centre = np.nanmean(np.where(finite_pts[..., None], X, np.nan), axis=1)
+    X = np.where(finite_pts[..., None], X, centre[:, None])
     rows = np.concatenate(groups)
     grp = np.repeat(np.arange(G), [len(g) for g in groups])
     sc = detections.scores[rows]
     kp = detections.keypoints_px[rows]
-    size = np.nanmax(np.linalg.norm(kp - np.nanmean(kp, 1, keepdims=True), axis=-1), axis=1)
-    sigma_px = np.maximum(0.01 * 2.0 * size, 1.0)  # size ~ half the body extent
+    with np.errstate(invalid="ignore"):
+        size = np.nanmax(np.linalg.norm(kp - np.nanmean(kp, 1, keepdims=True), axis=-1), axis=1)
+    sigma_px = np.maximum(0.01 * 2.0 * np.nan_to_num(size), 1.0)  # size ~ half the body extent
     ok = (sc >= min_score) & np.isfinite(kp).all(-1)
     d_idx, j_idx = np.nonzero(ok)
     view = detections.view[rows]
+    lifted_joints = lifted.joints_cam_m[rows]
+    lifted_ok = np.isfinite(lifted_joints).all(-1)  # (S, 23): joints of NaN poses drop out of the shape term
     prior_f = np.zeros(V) if focal_prior_px is None else np.log(np.asarray(focal_prior_px, dtype=np.float64))
     prior_std = np.full(V, np.inf) if focal_prior_rel_std is None else np.asarray(focal_prior_rel_std, float)
     prior_w = np.where(np.isfinite(prior_std) & np.isfinite(prior_f), 1.0 / np.maximum(prior_std, 1e-3), 0.0)
+    log_bounds = np.log(bounds)
     prob = _Problem(
         V=V, G=G, square=square_pixels,
         o_group=grp[d_idx], o_view=view[d_idx], o_joint=j_idx,
         o_px=kp[d_idx, j_idx] - pp[view[d_idx]],
         o_w=np.sqrt(sc[d_idx, j_idx]) / sigma_px[d_idx],
-        s_group=grp, s_view=view, s_joints=lifted.joints_cam_m[rows], shape_w=1.0 / shape_std_m,
+        s_group=grp, s_view=view, s_joints=np.where(lifted_ok[..., None], lifted_joints, 0.0),
+        shape_w=lifted_ok / shape_std_m,
+        log_f_mid=log_bounds.mean(1), log_f_half=0.5 * (log_bounds[:, 1] - log_bounds[:, 0]),
         prior_log_f=np.nan_to_num(prior_f), prior_w=prior_w, huber=huber,
         scale_w=1.0 / group_scale_std if group_scale_std else 0.0, free_scale=bool(group_scale_std),
     )
     nf = 1 if square_pixels else 2
     nc = nf + 6
+    log_f0 = np.log(np.c_[fx0] if square_pixels else np.c_[fx0, fy0])
+    if square_pixels and not np.allclose(fx0, fy0):
+        log_f0 = 0.5 * (np.log(np.c_[fx0]) + np.log(np.c_[fy0]))
+    outside = np.flatnonzero(((log_f0 < log_bounds[:, :1]) | (log_f0 > log_bounds[:, 1:])).any(1))
+    if len(outside):
+        logger.warning("bundle adjustment: views %s start outside their focal bounds (%s px at %s px): started "
+                       "inside", outside.tolist(), np.round(np.exp(log_f0[outside, 0])).tolist(),
+                       np.round(bounds[outside]).tolist())
     cams = np.zeros((V, nc))
-    cams[:, 0] = np.log(fx_px)
-    if not square_pixels:
-        cams[:, 1] = np.log(fy_px)
-    elif not np.allclose(fx_px, fy_px):
-        cams[:, 0] = 0.5 * (np.log(fx_px) + np.log(fy_px))
-    cams[:, nf + 3 :] = t_cam_from_world_m
-    R0 = np.asarray(R_cam_from_world, dtype=np.float64).copy()
-    X = np.asarray(points_world_m, dtype=np.float64).copy()
+    cams[:, :nf] = _focal_parameters(prob, log_f0)
+    cams[:, nf + 3 :] = t_init
+    R0 = R_init.copy()
     log_q = np.zeros(G)
     free = np.ones((V, nc), bool)
     free[0, nf:] = False
 
-    lam, converged, it = 1e-3, False, 0
+    lam, converged, it, rejected = 1e-3, False, 0, 0
     Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
+    if not np.isfinite(cost):
+        raise CalibrationError("bundle adjustment: the starting cost is not finite (non-finite keypoints or poses)")
     for it in range(1, max_iterations + 1):
         improved = False
         for _ in range(10):
-            dc, dp, dq, S = _solve(Hcc, Hcp, Hpp, gc, gp, lam)
-            new_cams, new_X, new_q = cams + dc, X + dp, log_q + dq
-            # fold the rotation increment into R0 so the increment parameters stay near zero
-            r_obs, r_shape, r_prior, r_scale, _ = _residuals(prob, new_cams, R0, new_X, new_q)
-            new_cost = _robust_cost(r_obs, r_shape, r_prior, r_scale, huber)
-            if np.isfinite(new_cost) and new_cost < cost:
+            step = _damped_step(prob, Hcc, Hcp, Hpp, gc, gp, lam, cams, R0, X, log_q, huber)
+            if step is not None and step[-1] < cost:
+                new_cams, new_X, new_q, new_cost = step
                 improved = True
                 break
+            # divergence (cost increase, non-finite values, singular system): back to the last good state
+            rejected += 1
             lam *= 10.0
         if not improved:
             converged = True
             break
+        # fold the rotation increment into R0 so the increment parameters stay near zero
         R0 = rotvec_to_rotmat(new_cams[:, nf : nf + 3]) @ R0
         new_cams[:, nf : nf + 3] = 0.0
         cams, X, log_q = new_cams, new_X, new_q
@@ -401,16 +498,59 @@ def bundle_adjust(
         if (old - cost) / max(old, 1e-12) < tolerance:
             converged = True
             break
-    _, _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
-    cov = np.linalg.pinv(S)
-    f_var = np.array([cov[v * nc, v * nc] for v in range(V)])
+    f_std = np.full(V, np.inf)
+    try:
+        _, _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
+        if np.isfinite(S).all():
+            cov = np.linalg.pinv(S)
+            # std of log f = std of u times d log f / d u
+            dlogf = _log_focal(prob, cams[:, :nf])[1][:, 0]
+            f_std = np.sqrt(np.maximum(np.array([cov[v * nc, v * nc] for v in range(V)]), 0.0)) * dlogf
+    except np.linalg.LinAlgError:
+        logger.warning("bundle adjustment: singular final system, focal uncertainties unknown")
     fx, fy, R, t = _unpack(prob, cams, R0)
-    r_obs, _, _, _, _ = _residuals(prob, cams, R0, X, log_q)
+    r_obs, _, _, _, (_, _, _, _, P) = _residuals(prob, cams, R0, X, log_q)
     err_px = np.linalg.norm(r_obs / prob.o_w[:, None], axis=1)
     inl = w_obs >= 1.0
     rms = np.array([np.sqrt(np.mean(err_px[(prob.o_view == v) & inl] ** 2)) if np.any((prob.o_view == v) & inl)
                     else np.nan for v in range(V)])
-    logger.info("bundle adjustment: %d groups, %d keypoints, %d iterations, cost %.4g, rms %s px", G, len(err_px), it,
-                cost, np.round(rms, 2))
-    return BundleResult(fx, fy, R, t, X, np.sqrt(np.maximum(f_var, 0.0)), rms, float(inl.mean()), it, converged,
-                        np.exp(log_q))
+    status = _view_status(prob, np.log(fx), log_bounds, P[:, 2], inl)
+    logger.info("bundle adjustment: %d groups, %d keypoints, %d iterations (%d steps refused), cost %.4g, rms %s px",
+                G, len(err_px), it, rejected, cost, np.round(rms, 2))
+    if (status != "ok").any():
+        logger.warning("bundle adjustment: views %s end %s", np.flatnonzero(status != "ok").tolist(),
+                       status[status != "ok"].tolist())
+    return BundleResult(fx, fy, R, t, X, f_std, rms, float(inl.mean()) if len(inl) else 0.0, it, converged,
+                        np.exp(log_q), status, rejected)
+
+
+def _damped_step(prob, Hcc, Hcp, Hpp, gc, gp, lam, cams, R0, X, log_q, huber):
+    """One damped Gauss-Newton step and its cost; None when the system is singular or anything is non-finite."""
+    try:
+        with np.errstate(all="ignore"):
+            dc, dp, dq, _ = _solve(Hcc, Hcp, Hpp, gc, gp, lam)
+            if not (np.isfinite(dc).all() and np.isfinite(dp).all() and np.isfinite(dq).all()):
+                return None
+            new_cams, new_X, new_q = cams + dc, X + dp, log_q + dq
+            r_obs, r_shape, r_prior, r_scale, _ = _residuals(prob, new_cams, R0, new_X, new_q)
+            new_cost = _robust_cost(r_obs, r_shape, r_prior, r_scale, huber)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.isfinite(new_cost):
+        return None
+    return new_cams, new_X, new_q, new_cost
+
+
+def _view_status(prob: _Problem, log_fx, log_bounds, depth_m, inlier) -> np.ndarray:
+    status = np.full(prob.V, "ok", dtype=object)
+    margin = 0.02 * (log_bounds[:, 1] - log_bounds[:, 0])
+    status[(log_fx <= log_bounds[:, 0] + margin) | (log_fx >= log_bounds[:, 1] - margin)] = "focal_at_bound"
+    for v in range(prob.V):
+        mine = prob.o_view == v
+        if not mine.any():
+            continue
+        if np.mean(depth_m[mine] <= 1e-6) > 0.5:
+            status[v] = "behind_camera"
+        elif not inlier[mine].any():
+            status[v] = "no_inliers"
+    return status.astype(str)
