@@ -24,6 +24,19 @@ def ring_stand_in(ring_scene):
 
 
 @pytest.fixture(scope="session")
+def ring_true_groups(ring_scene, ring_stand_in):
+    """(groups, points): the ring scene's groups of true identities (one person in one frame seen by >= 2 views),
+    every 3rd frame, as arrays of detection rows, and the true (G, 23, 3) keypoints of each group."""
+    d, pid = ring_stand_in.detections, ring_stand_in.person_id
+    keys = {}
+    for row in np.flatnonzero(pid >= 0):
+        if d.frame[row] % 3 == 0:
+            keys.setdefault((d.frame[row], pid[row]), []).append(row)
+    groups = [np.array(g) for g in keys.values() if len(g) >= 2]
+    return groups, np.stack([ring_scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
+
+
+@pytest.fixture(scope="session")
 def simulate_views():
     """The :func:`simulate` helper."""
     return simulate

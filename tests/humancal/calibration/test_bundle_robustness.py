@@ -9,20 +9,11 @@ from humancal.calibration import CalibrationError, ExtrinsicsConfig, LiftedPoses
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 
 
-def _true_groups(scene, d, pid):
-    keys = {}
-    for row in np.flatnonzero(pid >= 0):
-        if d.frame[row] % 3 == 0:
-            keys.setdefault((d.frame[row], pid[row]), []).append(row)
-    groups = [np.array(g) for g in keys.values() if len(g) >= 2]
-    return groups, np.stack([scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
-
-
 @pytest.fixture(scope="module")
-def ring_problem(ring_scene, ring_stand_in):
+def ring_problem(ring_scene, ring_stand_in, ring_true_groups):
     d, lifted, pid = ring_stand_in.detections, ring_stand_in.lifted, ring_stand_in.person_id
     rig = list(ring_scene.rig)
-    groups, points = _true_groups(ring_scene, d, pid)
+    groups, points = ring_true_groups
     return dict(
         d=d, lifted=lifted, groups=groups, points=points,
         R=np.stack([c.R_cam_from_world for c in rig]), t=np.stack([c.t_cam_from_world_m for c in rig]),

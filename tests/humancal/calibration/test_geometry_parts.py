@@ -13,22 +13,11 @@ from humancal.lifter import standing_score
 from humancal.camera import Camera, project_points
 
 
-def _true_groups(scene, d, pid):
-    """Groups of true identities (one person in one frame seen by >= 2 views), every 3rd frame, and the true
-    keypoints of each group."""
-    keys = {}
-    for row in np.flatnonzero(pid >= 0):
-        if d.frame[row] % 3 == 0:
-            keys.setdefault((d.frame[row], pid[row]), []).append(row)
-    groups = [np.array(g) for g in keys.values() if len(g) >= 2]
-    return groups, np.stack([scene.keypoints_world_m[pid[g[0]], d.frame[g[0]]] for g in groups])
-
-
-def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in):
+def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in, ring_true_groups):
     d, lifted, pid = ring_stand_in.detections, ring_stand_in.lifted, ring_stand_in.person_id
     rig = list(ring_scene.rig)
     V = len(rig)
-    groups, points = _true_groups(ring_scene, d, pid)
+    groups, points = ring_true_groups
     rng = np.random.default_rng(0)
     R_true = np.stack([c.R_cam_from_world for c in rig])
     t_true = np.stack([c.t_cam_from_world_m for c in rig])
@@ -48,7 +37,7 @@ def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in)
     assert np.all(res.focal_rel_std < 0.02)
 
 
-def test_bundle_adjustment_with_wrong_people_sizes(ring_scene, ring_stand_in):
+def test_bundle_adjustment_with_wrong_people_sizes(ring_scene, ring_stand_in, ring_true_groups):
     """Lifted poses of each person scaled by that person's size error: the group scales absorb it."""
     d, pid = ring_stand_in.detections, ring_stand_in.person_id
     rig = list(ring_scene.rig)
@@ -59,7 +48,7 @@ def test_bundle_adjustment_with_wrong_people_sizes(ring_scene, ring_stand_in):
                                height_noise_m=0.0, rotation_noise_deg=0.0, depth_flip_rate=0.0)
     scaled = lifted.joints_cam_m * size[np.maximum(pid, 0)][:, None, None]
     lifted = type(lifted)(scaled, lifted.height_m, lifted.upright_score, lifted.valid)
-    groups, points = _true_groups(ring_scene, d, pid)
+    groups, points = ring_true_groups
     R = np.stack([c.R_cam_from_world for c in rig])
     t = np.stack([c.t_cam_from_world_m for c in rig])
     f_true = np.array([c.K[0, 0] for c in rig])
