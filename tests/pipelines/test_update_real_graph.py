@@ -9,7 +9,6 @@ import dagster as dg
 import numpy as np
 import pytest
 
-from humancal.lifter import SHIPPED_LIFTER_STEM
 from pipelines.definitions import build_definitions
 from pipelines.partitions import SEQUENCES
 from pipelines.update import update
@@ -19,10 +18,7 @@ from resources.io_managers import partition_path
 PARTITION = "synthetic__tiny"
 QUIET = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
 
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.skipif(not SHIPPED_LIFTER_STEM.with_suffix(".safetensors").exists(), reason="no shipped lifter weights"),
-]
+pytestmark = pytest.mark.slow
 
 
 def test_update_on_the_real_graph(tmp_path):
