@@ -23,6 +23,12 @@ materialized and up to date, also under ``--partition``. A partition that is mis
 (data not here, computed on request) or outside ``--partition`` makes it wait: it is never computed from a partial
 or mixed set, and :attr:`UpdateResult.waiting` says why it was left.
 
+A failed blocking check (severity ERROR) holds back everything computed from the asset partition it checked.
+Dagster does that within one run; the update runs one level of the graph per run, so it reads the check outcomes
+of the latest materialization of every input before it runs anything (:func:`assets.checks.latest_check_outcomes`),
+also when the check failed in an earlier update. :attr:`UpdateResult.checks` holds every failed check evaluated by
+this update's runs, and the failing blocking checks of earlier runs that still hold something back.
+
 Kill -9 in the middle of an update is safe: artifacts are written atomically and a materialization is recorded
 only after its artifact is in place, so the next update finds the interrupted asset partitions missing or stale.
 """
@@ -37,6 +43,7 @@ from dataclasses import dataclass, field
 import dagster as dg
 from upath import UPath
 
+from assets.checks import CheckOutcome, latest_check_outcomes
 from assets.common import ON_REQUEST_KEY
 from pipelines.partitions import SEQUENCES
 from pipelines.staleness import Freshness, StalenessView, Status, io_manager_key
@@ -68,11 +75,22 @@ class UpdateResult:
     depends on them was left out (other partitions went on)."""
     waiting: tuple[tuple[str, str | None, str], ...] = ()
     """(asset key, partition key, reason) of the asset partitions left missing or stale because an input could
-    not be brought up to date here (e.g. a fan-in asset whose other partitions are outside ``--partition``)."""
+    not be brought up to date here (e.g. a fan-in asset whose other partitions are outside ``--partition``), or
+    held back by a failed blocking check upstream."""
+    checks: tuple[CheckOutcome, ...] = ()
+    """Every check that failed in this update's runs (warnings too), and the failing blocking checks recorded by
+    earlier runs on asset partitions in scope (what depends on those was held back)."""
+    earlier_checks: tuple[CheckOutcome, ...] = ()
+    """Those of :attr:`checks` that were evaluated before this update (their asset partition was up to date)."""
 
     @property
     def count(self) -> int:
         return len(self.materialized)
+
+    @property
+    def blocking_failed(self) -> bool:
+        """A blocking check failed: something downstream of it was not computed."""
+        return any(outcome.blocks for outcome in self.checks)
 
     def waiting_lines(self) -> list[str]:
         """One line per waiting asset partition, for the user."""
@@ -90,6 +108,11 @@ class _Graph:
         self.specs = {spec.key: spec for spec in defs.resolve_all_asset_specs()}
         self.parents = {key: [d.asset_key for d in spec.deps if d.asset_key in self.specs] for key, spec in self.specs.items()}
         self.children: dict[dg.AssetKey, list[dg.AssetKey]] = defaultdict(list)
+        self.blocking_checked = {
+            spec.asset_key for assets_def in defs.resolve_asset_graph().assets_defs
+            for spec in assets_def.check_specs if spec.blocking
+        } | {spec.asset_key for checks_def in (getattr(defs, "asset_checks", None) or [])
+             for spec in checks_def.check_specs if spec.blocking}
         for key, parents in self.parents.items():
             for parent in parents:
                 self.children[parent].append(key)
@@ -230,6 +253,59 @@ class _Update:
         self.written: set[AssetPartition] = set()
         self.blocked: set[AssetPartition] = set()
         self.failed: dict[AssetPartition, str] = {}
+        self.held: dict[AssetPartition, str] = {}
+        self.checks: dict[tuple[str, str | None, str], CheckOutcome] = {}
+        self.earlier: set[tuple[str, str | None, str]] = set()
+        self.outcomes: dict[AssetPartition, tuple[CheckOutcome, ...]] = {}
+
+    def blocking_failures(self, item: AssetPartition) -> list[CheckOutcome]:
+        """The failed blocking checks of the latest materialization of ``item`` (cached until it is rewritten)."""
+        if item[0] not in self.graph.blocking_checked:
+            return []
+        if item not in self.outcomes:
+            self.outcomes[item] = latest_check_outcomes(self.instance, *item) or ()
+        return [outcome for outcome in self.outcomes[item] if outcome.blocks]
+
+    def note_checks(self, outcomes: Iterable[CheckOutcome], earlier: bool) -> None:
+        """Remember the failed ones among ``outcomes`` for the result (the first report of a check wins)."""
+        for outcome in outcomes:
+            name = (outcome.asset, outcome.partition, outcome.check)
+            if not outcome.passed and name not in self.checks:
+                self.checks[name] = outcome
+                if earlier:
+                    self.earlier.add(name)
+
+    def hold(self, r: _Round, item: AssetPartition, scope: set[AssetPartition]) -> bool:
+        """Hold ``item`` and what is computed from it back if an input failed a blocking check; says whether."""
+        failing = [(parent, outcome) for parent in r.inputs(*item) for outcome in self.blocking_failures(parent)]
+        if not failing:
+            return False
+        for parent, outcome in failing:
+            self.note_checks([outcome], earlier=parent not in self.written)
+        reason = "held back: " + "; ".join(f"{o.where} failed its blocking check {o.check}" for _, o in failing)
+        key, pk = item
+        for k in self.graph.with_descendants([key]):
+            if not self.graph.partitioned(k):
+                keys = [] if pk is not None else [(k, None)]  # a fan-in reader waits for this partition
+            else:
+                keys = [(k, pk)] if pk is not None else [(k, q) for q in self.wanted]
+            for held in keys:
+                self.blocked.add(held)
+                if held in scope:
+                    self.held.setdefault(held, reason)
+        return True
+
+    def result(self, done: list[tuple[str, str | None]], rounds: int, waiting: Iterable) -> UpdateResult:
+        # A blocking check that failed before this update still holds back what depends on its asset partition,
+        # also when nothing here had to wait for it this time (its descendants were computed before it failed).
+        for item in self.scope():
+            if item not in self.written:
+                self.note_checks(self.blocking_failures(item), earlier=True)
+        held = [(key.to_user_string(), pk, reason) for (key, pk), reason in self.held.items()]
+        return UpdateResult(
+            tuple(done), rounds, _failed(self), (*held, *waiting), tuple(self.checks.values()),
+            tuple(self.checks[name] for name in self.checks if name in self.earlier),
+        )
 
     def scope(self) -> list[AssetPartition]:
         """The asset partitions this update may compute (on-request and excluded assets are not among them)."""
@@ -254,6 +330,8 @@ class _Update:
         name = _name(key.to_user_string(), pk)
         if parent in self.failed:
             return f"{name} failed"
+        if parent in self.held:
+            return f"{name} is {self.held[parent]}"
         command = self.graph.on_request(key)
         if command:
             return f"{name} is computed on request ({command}) and is {r.status(key, pk).freshness.value}"
@@ -320,7 +398,9 @@ def update(
 
     A failing asset partition does not stop the update: it is reported in ``UpdateResult.failed`` and what
     depends on it (in that partition; everywhere for an unpartitioned asset) is left out. Asset partitions
-    whose inputs cannot be brought up to date here are reported in ``UpdateResult.waiting``.
+    whose inputs cannot be brought up to date here are reported in ``UpdateResult.waiting``. An asset partition
+    whose input failed a blocking check is held back with its descendants (``UpdateResult.waiting``), and the
+    failed checks are in ``UpdateResult.checks``.
 
     Args:
         defs: the definitions.
@@ -339,12 +419,15 @@ def update(
     checks = list(getattr(defs, "asset_checks", None) or [])
     for round_no in range(1, max_rounds + 1):
         r = _Round(u)
-        todo = [item for item in u.scope() if not r.status(*item).fresh]
-        pending = set(todo)
+        scope = u.scope()
+        todo = [item for item in scope if not r.status(*item).fresh]
         ready = [item for item in todo if not any(r.behind(parent) for parent in r.inputs(*item))]
+        ready = [item for item in ready if not u.hold(r, item, set(scope))]
+        todo = [item for item in todo if item not in u.blocked and (item[0], None) not in u.blocked]
+        pending = set(todo)
         if not ready:
-            waiting = tuple((key.to_user_string(), pk, u.waiting_reason(r, (key, pk), pending)) for key, pk in todo)
-            return UpdateResult(tuple(done), round_no - 1, _failed(u), waiting)
+            waiting = [(key.to_user_string(), pk, u.waiting_reason(r, (key, pk), pending)) for key, pk in todo]
+            return u.result(done, round_no - 1, waiting)
         if on_round:
             on_round(round_no, ready)
         by_partition: dict[str | None, list[dg.AssetKey]] = defaultdict(list)
@@ -361,6 +444,9 @@ def update(
                 raise_on_error=False,
             )
             produced = {e.asset_key for e in result.get_asset_materialization_events()}
+            u.note_checks((CheckOutcome.of(e, pk) for e in result.get_asset_check_evaluations()), earlier=False)
+            for key in keys:
+                u.outcomes.pop((key, pk), None)
             for key in keys:
                 if key in produced:
                     done.append((key.to_user_string(), pk))
@@ -368,7 +454,9 @@ def update(
                     u.artifacts.forget(key, pk)
             if result.success:
                 continue
-            message = "; ".join(_first_line(e) for e in result.get_step_failure_events()) or "run failed"
+            # A failed blocking check fails its step after the asset was stored: reported in checks, not here.
+            failures = [e for e in result.get_step_failure_events() if not _is_check_failure(e)]
+            message = "; ".join(_first_line(e) for e in failures) or "run failed"
             for key in keys:
                 if key not in produced:
                     u.failed[(key, pk)] = message
@@ -380,6 +468,11 @@ def update(
 
 def _failed(u: _Update) -> tuple[tuple[str, str | None, str], ...]:
     return tuple((key.to_user_string(), pk, message) for (key, pk), message in u.failed.items())
+
+
+def _is_check_failure(event) -> bool:
+    error = event.step_failure_data.error if event.step_failure_data else None
+    return error is not None and error.cls_name == "DagsterAssetCheckFailedError"
 
 
 def _first_line(event) -> str:
