@@ -122,6 +122,12 @@ def cmd_demo(args) -> int:
                     run_config=QUIET_RUN_CONFIG)
     print(f"materialized {result.count} asset partitions in {time.perf_counter() - t0:.1f} s\n", flush=True)
     if _report_failures(result):
+        # Not the stored table: it was computed by an earlier run, from other cameras, and would read as if all
+        # were fine.
+        if result.blocking_failed:
+            print(f"no metric table: a blocking check failed, so metric_tables[{DEMO_PARTITION}] was not computed "
+                  "from these cameras (a table stored by an earlier run describes other ones: `humancal report`)",
+                  file=sys.stderr)
         return 1
     _print_metrics(_stored_metrics([DEMO_PARTITION], headline_only=True), "md")
     return 0
@@ -191,14 +197,28 @@ def cmd_update(args) -> int:
 
 
 def _report_failures(result) -> int:
+    """Print what was left, what failed and every failed check; 1 if an asset partition or a blocking check failed."""
     for line in result.waiting_lines():  # left because an input cannot be brought up to date here
         print(line)
-    if not result.failed:
-        return 0
-    print(f"{len(result.failed)} asset partition(s) failed (what depends on them was left out):", file=sys.stderr)
-    for asset, partition, message in result.failed:
-        print(f"  {asset}[{partition}]: {message}" if partition else f"  {asset}: {message}", file=sys.stderr)
-    return 1
+    _print_failed_checks(result)
+    if result.failed:
+        print(f"{len(result.failed)} asset partition(s) failed (what depends on them was left out):", file=sys.stderr)
+        for asset, partition, message in result.failed:
+            print(f"  {asset}[{partition}]: {message}" if partition else f"  {asset}: {message}", file=sys.stderr)
+    return 1 if result.failed or result.blocking_failed else 0
+
+
+def _print_failed_checks(result) -> None:
+    """ERROR: a blocking check failed (what depends on it was not computed); WARN: a warning; ERROR (not
+    blocking): a failed check that does not protect anything downstream."""
+    if not result.checks:
+        return
+    blocking = sum(outcome.blocks for outcome in result.checks)
+    print(f"{len(result.checks)} check(s) failed, {blocking} blocking:", file=sys.stderr)
+    for outcome in result.checks:
+        label = "ERROR" if outcome.blocks else "WARN" if outcome.severity == "WARN" else "ERROR (not blocking)"
+        when = " (evaluated by an earlier run)" if outcome in result.earlier_checks else ""
+        print(f"  {label} {outcome.where} {outcome.check}{when}: {outcome.description}", file=sys.stderr)
 
 
 def _explain_missing_tables(missing: list[str]) -> str:

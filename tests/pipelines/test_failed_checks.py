@@ -1,0 +1,164 @@
+"""Failed checks are loud: the real ``extrinsics`` asset (its calibration replaced by a fixed rig) fails its
+blocking ``rig_geometry`` check on a camera below the floor; what depends on it is not computed, ``humancal demo``
+and ``humancal update`` print every failed check and exit 1; warnings are printed and exit 0. Toy inputs, an
+in-memory instance: no external data, no body model, no lifter.
+"""
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import dagster as dg
+import numpy as np
+import pandas as pd
+import pytest
+
+import assets.calibration as calibration
+import pipelines.cli as cli
+import pipelines.definitions
+from assets.checks import latest_check_outcomes
+from assets.common import sequence_asset
+from humancal.camera import Camera
+from pipelines.partitions import SEQUENCES
+from pipelines.update import update
+
+BELOW, LOOSE = "toy__below", "toy__loose"
+"""A partition whose rig has a camera below the floor, and one whose rig is fine but one focal is loose."""
+PEOPLE = np.array([[0.5, 0.3, 0.0], [-0.4, 0.6, 0.0], [0.0, -0.7, 0.0]])
+
+
+def _look_at(centre, target, f=1000.0, size=(1920, 1080)) -> Camera:
+    z = np.asarray(target, float) - centre
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    K = np.array([[f, 0, size[0] / 2], [0, f, size[1] / 2], [0, 0, 1.0]])
+    return Camera.from_center(K, np.stack([x, np.cross(z, x), z]), np.asarray(centre, float), *size)
+
+
+def _calibration(partition: str):
+    """What ``estimate_extrinsics`` returns, for a rig of four cameras around the people."""
+    angles = np.linspace(0, 2 * np.pi, 4, endpoint=False)
+    cameras = [_look_at(np.array([5 * np.cos(a), 5 * np.sin(a), 2.5]), [0, 0, 1.0]) for a in angles]
+    if partition == BELOW:
+        cameras[1] = _look_at(np.array([0.0, 5.0, -0.5]), [0, 0, -1.0])
+    per_view = pd.DataFrame({"view": range(4), "focal_px": 1000.0, "focal_rel_std": [0.01, 0.2, 0.01, 0.01],
+                             "focal_status": ["ok", "loose", "ok", "ok"]})
+    diagnostics = SimpleNamespace(floor=SimpleNamespace(floor_points_m=PEOPLE), per_view=per_view,
+                                  bundle_inlier_fraction=1.0)
+    return SimpleNamespace(cameras=cameras, diagnostics=diagnostics)
+
+
+@pytest.fixture
+def defs(tmp_path, monkeypatch):
+    """Toy inputs -> the real extrinsics asset -> a toy reader, stored by a pickling IO manager."""
+    monkeypatch.setattr(calibration, "_calibration_inputs", lambda detections: (None, None))
+    monkeypatch.setattr(calibration, "intrinsics_from_table", lambda table: table["sequence"].iloc[0])
+    monkeypatch.setattr(calibration, "estimate_extrinsics", lambda dense, lifted, partition, config: _calibration(partition))
+    monkeypatch.setattr(calibration, "plot_rigs", lambda *args, **kwargs: Path(args[3]).write_bytes(b"png") and args[3])
+
+    def toy(name):
+        @dg.asset(name=name, partitions_def=SEQUENCES, group_name="sequence")
+        def _toy(context: dg.AssetExecutionContext) -> pd.DataFrame:
+            return pd.DataFrame({"sequence": [context.partition_key]})
+
+        return _toy
+
+    @sequence_asset("metrics", code_version="1")
+    def metric_tables(extrinsics: pd.DataFrame) -> pd.DataFrame:
+        return extrinsics
+
+    return dg.Definitions(
+        assets=[toy("detections"), toy("intrinsics"), toy("views"), calibration.extrinsics, metric_tables],
+        resources={"io_manager": dg.FilesystemIOManager(base_dir=str(tmp_path / "artifacts"))},
+    )
+
+
+@pytest.fixture
+def instance():
+    inst = dg.DagsterInstance.ephemeral()
+    inst.add_dynamic_partitions(SEQUENCES.name, [BELOW, LOOSE])
+    return inst
+
+
+def _materialized(instance, asset: str, partition: str) -> bool:
+    return instance.get_latest_materialization_event(dg.AssetKey(asset)) is not None and bool(
+        instance.fetch_materializations(
+            dg.AssetRecordsFilter(asset_key=dg.AssetKey(asset), asset_partitions=[partition]), limit=1).records)
+
+
+def test_a_failed_blocking_check_holds_back_its_downstream_in_that_partition_only(defs, instance):
+    result = update(defs, instance)
+    assert ("extrinsics", BELOW) in result.materialized  # stored, with its failed check, for a person to look at
+    assert ("metric_tables", LOOSE) in result.materialized
+    assert ("metric_tables", BELOW) not in result.materialized and not _materialized(instance, "metric_tables", BELOW)
+    assert result.failed == () and result.blocking_failed
+    failed = {(o.partition, o.check): o for o in result.checks}
+    rig = failed[(BELOW, "rig_geometry")]
+    assert rig.blocks and "view 1: camera centre -0.50 m is not above the floor" in rig.description
+    warning = failed[(LOOSE, "focal_constrained")]
+    assert not warning.blocks and warning.severity == "WARN" and "view 1: focal 1000 px +- 20 %" in warning.description
+    assert ("metric_tables", BELOW, "held back: extrinsics[toy__below] failed its blocking check rig_geometry") \
+        in result.waiting
+    assert result.earlier_checks == ()
+
+    again = update(defs, instance)  # nothing new runs, and the failure still holds metric_tables back
+    assert again.materialized == () and again.blocking_failed
+    assert [(o.partition, o.check) for o in again.earlier_checks] == [(BELOW, "rig_geometry")]
+    assert ("metric_tables", BELOW) in {(a, p) for a, p, _ in again.waiting}
+
+
+def test_the_recorded_outcomes_are_those_of_the_latest_materialization(defs, instance):
+    update(defs, instance)
+    below = {o.check: o for o in latest_check_outcomes(instance, dg.AssetKey("extrinsics"), BELOW)}
+    loose = {o.check: o for o in latest_check_outcomes(instance, dg.AssetKey("extrinsics"), LOOSE)}
+    assert set(below) == set(loose) == {"cameras_valid", "focal_plausible", "rig_geometry", "focal_constrained"}
+    assert not below["rig_geometry"].passed and loose["rig_geometry"].passed
+    assert below["rig_geometry"].blocking and not below["focal_constrained"].blocking
+    assert latest_check_outcomes(instance, dg.AssetKey("metric_tables"), BELOW) is None
+
+
+@pytest.fixture
+def cli_on(defs, instance, monkeypatch):
+    """The CLI on the toy graph: its instance, no datasets to register, a stand-in for the stored metric table."""
+    monkeypatch.setattr(pipelines.definitions, "defs", defs)
+    monkeypatch.setattr(cli, "_instance", lambda: instance)
+    monkeypatch.setattr(cli, "register_partitions", lambda instance, defs: [BELOW, LOOSE])
+    monkeypatch.setattr(cli, "_report_missing_data", lambda defs: {})
+    monkeypatch.setattr(cli, "_print_active_lifter", lambda: None)
+    table = pd.DataFrame({"dataset": ["toy"], "sequence": ["loose"], "method": ["init"],
+                          "metric": ["focal_error_pct"], "value": [1.5], "unit": ["%"]})
+    monkeypatch.setattr(cli, "_stored_metrics", lambda partitions, headline_only: table)
+
+    def run(*argv, demo_partition=None):
+        if demo_partition:
+            monkeypatch.setattr(cli, "DEMO_PARTITION", demo_partition)
+        return cli.main(list(argv))
+
+    return run
+
+
+def test_demo_exits_1_with_the_failed_blocking_check_and_its_message(cli_on, instance, capsys):
+    assert cli_on("demo", demo_partition=BELOW) == 1
+    err = capsys.readouterr().err
+    assert "ERROR extrinsics[toy__below] rig_geometry: view 1: camera centre -0.50 m is not above the floor" in err
+    assert "WARN extrinsics[toy__below] focal_constrained: view 1: focal 1000 px" in err
+    assert "no metric table" in err and "focal_error_pct" not in err
+    assert not _materialized(instance, "metric_tables", BELOW)
+
+
+def test_demo_with_warnings_only_prints_them_above_the_table_and_exits_0(cli_on, capsys):
+    assert cli_on("demo", demo_partition=LOOSE) == 0
+    out, err = capsys.readouterr()
+    assert "WARN extrinsics[toy__loose] focal_constrained" in err and "ERROR" not in err
+    assert "focal_error_pct" in out
+
+
+def test_update_exits_1_while_a_blocking_check_fails_also_when_nothing_is_left_to_run(cli_on, capsys):
+    assert cli_on("update") == 1
+    out, err = capsys.readouterr()
+    assert "ERROR extrinsics[toy__below] rig_geometry: view 1: camera centre" in err
+    assert "left metric_tables[toy__below]: held back: extrinsics[toy__below] failed its blocking check" in out
+    assert cli_on("update") == 1
+    err = capsys.readouterr().err
+    assert "ERROR extrinsics[toy__below] rig_geometry (evaluated by an earlier run)" in err
+    assert "focal_constrained" not in err  # a warning is printed by the run that found it
