@@ -60,7 +60,8 @@ class ExtrinsicsConfig:
         single_view_min_rel_std: floor on the prior std of well-conditioned single-view focal lengths.
         focal_range_rel: allowed focal range, multiples of the image diagonal (clips the initial values).
         max_groups: matched groups used by the bundle adjustment (spread over the sequence).
-        shape_std_m: std of the lifted joints in the bundle adjustment, metres.
+        shape_std_m: std of the lifted joints in the bundle adjustment, metres (chosen on seeded synthetic scenes
+            with the shipped lifter, docs/calibration.md).
         person_scale_std: relative std of a lifted person's size (a lifter sees body proportions, not size): the
             linear solve and the bundle adjustment estimate a size correction per matched pair / group with this
             prior, so that people's size errors do not distort the rig; None: sizes taken as lifted.
@@ -85,7 +86,7 @@ class ExtrinsicsConfig:
     single_view_min_rel_std: float = 0.05
     focal_range_rel: tuple[float, float] = (0.15, 5.0)
     max_groups: int = 200
-    shape_std_m: float = 0.1
+    shape_std_m: float = 0.5
     person_scale_std: float | None = 0.1
     bundle_iterations: int = 40
     max_focal_rel_std: float = 0.05
