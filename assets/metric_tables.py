@@ -6,6 +6,7 @@ from pathlib import Path
 import dagster as dg
 import pandas as pd
 
+from assets.checks import latest_check_outcomes
 from assets.common import png_metadata, sequence_asset, table_output
 from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
@@ -16,7 +17,7 @@ from humancal.tables import empty_table
 from resources.datasets import DatasetsResource
 
 
-@sequence_asset("metrics", code_version="4")
+@sequence_asset("metrics", code_version="5")
 def metric_tables(
     context: dg.AssetExecutionContext,
     datasets: DatasetsResource,
@@ -30,7 +31,8 @@ def metric_tables(
     gt_people: pd.DataFrame,
 ) -> dg.Output:
     """MPJPE, PCP and reprojection error of each method; the lifter's 3D and height errors; the camera
-    initialisation's focal, position, angle and reprojection errors; detection grouping on real datasets."""
+    initialisation's focal, position, angle and reprojection errors; detection grouping on real datasets.
+    The camera rows name the checks of ``extrinsics`` that its cameras failed (column ``failed_checks``)."""
     spec = datasets.spec(context.partition_key)
     gt = cameras_from_table(gt_cameras)
     estimated = cameras_from_table(extrinsics)
@@ -53,7 +55,8 @@ def metric_tables(
         ]
     if gt:
         parts.append(camera_metrics_table(spec.dataset, spec.sequence, estimated, gt,
-                                          raw_detections if identified else None, gt_associations if identified else None))
+                                          raw_detections if identified else None, gt_associations if identified else None,
+                                          failed_checks=_failed_camera_checks(context)))
     else:
         context.log.info(f"{spec.key}: no known cameras: no metric rows (the calibrated cameras are in extrinsics)")
     table = pd.concat(parts, ignore_index=True) if parts else empty_table("metrics")
@@ -69,3 +72,19 @@ def metric_tables(
         table, "metrics", rows=len(table), **pictures,
         summary=dg.MetadataValue.md(headline.to_markdown(index=False, floatfmt=".2f")),
     )
+
+
+def _failed_camera_checks(context: dg.AssetExecutionContext) -> str:
+    """The checks that the cameras of ``extrinsics`` in this partition failed, comma-separated ("" if none).
+
+    Read from the checks of its latest materialization (the cameras this asset reads); cameras whose checks were
+    never recorded (materialized without them) say so rather than pass.
+    """
+    outcomes = latest_check_outcomes(context.instance, dg.AssetKey("extrinsics"), context.partition_key)
+    if not outcomes:
+        context.log.warning("the checks of the extrinsics read here were not recorded: camera rows marked unchecked")
+        return "unchecked"
+    failed = sorted(o.check for o in outcomes if not o.passed)
+    if failed:
+        context.log.warning(f"camera rows computed from cameras that failed {', '.join(failed)}")
+    return ",".join(failed)

@@ -138,6 +138,9 @@ def camera_metrics_table(
     detections: pd.DataFrame | None = None,
     associations: pd.DataFrame | None = None,
     method: str = METHOD,
+    failed_checks: str = "",
 ) -> pd.DataFrame:
-    """The canonical ``metrics`` table of :func:`camera_metrics` (method ``"init"`` by default)."""
-    return metrics_table(dataset, sequence, method, camera_metrics(estimated, ground_truth, detections, associations))
+    """The canonical ``metrics`` table of :func:`camera_metrics` (method ``"init"`` by default); every row carries
+    ``failed_checks``, the checks the estimated cameras failed (comma-separated; empty: none)."""
+    rows = camera_metrics(estimated, ground_truth, detections, associations)
+    return metrics_table(dataset, sequence, method, rows, failed_checks=failed_checks)

@@ -142,4 +142,5 @@ def detection_quality_metrics(
             rows.extend((dataset, seq, method, name, sel, float(value), unit) for name, value, unit in figures)
     table = pd.DataFrame(rows, columns=["dataset", "sequence", "method", "metric", "view", "value", "unit"])
     table["view"] = table["view"].astype("Int32")
+    table["failed_checks"] = None  # figures of the detections, not of estimated cameras
     return validate_table(table, "metrics", source="detection_quality_metrics")

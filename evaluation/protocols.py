@@ -58,8 +58,15 @@ class MetricRow:
     view: int | None = None
 
 
-def metrics_table(dataset: str, sequence: str, method: str, rows: list[MetricRow]) -> pd.DataFrame:
-    """The canonical ``metrics`` table for one method on one sequence (``view`` null where a row has none)."""
+def metrics_table(
+    dataset: str, sequence: str, method: str, rows: list[MetricRow], failed_checks: str | None = None
+) -> pd.DataFrame:
+    """The canonical ``metrics`` table for one method on one sequence (``view`` null where a row has none).
+
+    Args:
+        failed_checks: for figures computed from estimated cameras, the checks those cameras failed
+            (comma-separated; empty: none); None for figures that are not.
+    """
     df = pd.DataFrame(
         {
             "dataset": dataset,
@@ -69,8 +76,9 @@ def metrics_table(dataset: str, sequence: str, method: str, rows: list[MetricRow
             "view": pd.array([r.view for r in rows], dtype="Int32"),
             "value": [float(r.value) for r in rows],
             "unit": [r.unit for r in rows],
+            "failed_checks": pd.Series([failed_checks] * len(rows), dtype=object),
         },
-        columns=["dataset", "sequence", "method", "metric", "view", "value", "unit"],
+        columns=["dataset", "sequence", "method", "metric", "view", "value", "unit", "failed_checks"],
     )
     return validate_table(df, "metrics")
 

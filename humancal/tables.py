@@ -16,8 +16,10 @@ Tables:
     associations: person id of each detection (-1 = not a person / not associated).
     people:       per person body-model shape (anny phenotypes) and height.
     motions:      per person and frame body-model parameters (later stages write them).
-    metrics:      evaluation figures (dataset, sequence, method, metric, view, value, unit); ``view`` is null for
-                  a figure that is not per view.
+    metrics:      evaluation figures (dataset, sequence, method, metric, view, value, unit, failed_checks); ``view``
+                  is null for a figure that is not per view; ``failed_checks`` names the checks that the estimated
+                  cameras a figure was computed from failed (comma-separated; empty: they passed every check; null:
+                  not computed from estimated cameras).
 """
 
 from __future__ import annotations
@@ -179,12 +181,13 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("view", pa.int32()),
             ("value", pa.float64()),
             ("unit", pa.string()),
+            ("failed_checks", pa.string()),
         ]
     ),
 }
 """The declared schema of every canonical table, by table name."""
 
-NULLABLE_COLUMNS: dict[str, frozenset[str]] = {"metrics": frozenset({"view"})}
+NULLABLE_COLUMNS: dict[str, frozenset[str]] = {"metrics": frozenset({"view", "failed_checks"})}
 """Columns that may hold nulls (every other column of every table must be filled), by table name. In pandas a
 nullable integer column is a nullable ``Int32`` column (``pd.NA`` for null)."""
 

@@ -75,8 +75,11 @@ def _check_partitions(requested: list[str] | None, defs) -> None:
 def _print_metrics(table, fmt: str) -> None:
     if fmt == "csv":
         sys.stdout.write(table.to_csv(index=False))
-    else:
-        sys.stdout.write(table.to_markdown(index=False, floatfmt=".2f") + "\n")
+        return
+    if "failed_checks" in table.columns:  # shown only where some figure comes from cameras that failed a check
+        flags = table["failed_checks"].fillna("")
+        table = table.assign(failed_checks=flags) if (flags != "").any() else table.drop(columns="failed_checks")
+    sys.stdout.write(table.to_markdown(index=False, floatfmt=".2f") + "\n")
 
 
 def _stored_metrics(partitions: list[str] | None, headline_only: bool):
@@ -102,6 +105,8 @@ def _stored_metrics(partitions: list[str] | None, headline_only: bool):
     if "view" not in table.columns:  # stored before metric tables had a view column
         table.insert(table.columns.get_loc("metric") + 1, "view", pd.NA)
     table["view"] = table["view"].astype("Int32")
+    if "failed_checks" not in table.columns:  # stored before metric tables named the cameras' failed checks
+        table["failed_checks"] = None
     if headline_only:  # headline: not per view, no per-joint / per-group suffix
         table = table[table["view"].isna() & ~table["metric"].str.contains("/", regex=False)].drop(columns="view")
     return table

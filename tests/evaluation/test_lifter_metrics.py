@@ -185,7 +185,8 @@ def test_nothing_matched_gives_an_empty_table(scene):
                              scene.cameras, scene.people),
     ):
         assert len(table) == 0
-        assert list(table.columns) == ["dataset", "sequence", "method", "metric", "view", "value", "unit"]
+        assert list(table.columns) == ["dataset", "sequence", "method", "metric", "view", "value", "unit",
+                                       "failed_checks"]
 
 
 def test_shelf_style_ground_truth_compares_the_12_shared_joints_about_the_hip_midpoint(scene):

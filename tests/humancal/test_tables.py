@@ -48,11 +48,12 @@ def test_missing_and_extra_columns_are_errors():
         validate_table(_detections(), "detectionz")
 
 
-def test_metrics_view_is_the_one_nullable_column():
+def test_metrics_view_and_failed_checks_are_the_nullable_columns():
     rows = pd.DataFrame({"dataset": "d", "sequence": "s", "method": "m", "metric": ["a", "a"],
-                         "view": [None, 2], "value": [1.0, 2.0], "unit": "px"})
+                         "view": [None, 2], "value": [1.0, 2.0], "unit": "px", "failed_checks": [None, "rig_geometry"]})
     out = validate_table(rows, "metrics")
     assert str(out["view"].dtype) == "Int32" and out["view"].isna().tolist() == [True, False] and out["view"][1] == 2
+    assert out["failed_checks"].isna().tolist() == [True, False] and out["failed_checks"][1] == "rig_geometry"
     with pytest.raises(TableError, match="column 'view' must be >= 0"):
         validate_table(rows.assign(view=[None, -1]), "metrics")
     with pytest.raises(TableError, match="column 'metric' has 1 missing"):

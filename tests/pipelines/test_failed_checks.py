@@ -17,6 +17,8 @@ import pipelines.cli as cli
 import pipelines.definitions
 from assets.checks import latest_check_outcomes
 from assets.common import sequence_asset
+from assets.metric_tables import _failed_camera_checks
+from evaluation.camera_metrics import camera_metrics_table
 from humancal.camera import Camera
 from pipelines.partitions import SEQUENCES
 from pipelines.update import update
@@ -162,3 +164,23 @@ def test_update_exits_1_while_a_blocking_check_fails_also_when_nothing_is_left_t
     err = capsys.readouterr().err
     assert "ERROR extrinsics[toy__below] rig_geometry (evaluated by an earlier run)" in err
     assert "focal_constrained" not in err  # a warning is printed by the run that found it
+
+
+
+def test_metric_rows_of_cameras_that_failed_a_check_name_it(defs, instance, capsys):
+    """metric_tables marks its camera rows with the failed checks of the extrinsics it reads; ``report`` shows
+    the column only when some row is marked."""
+    update(defs, instance)  # extrinsics of both partitions, with their checks
+
+    def flags(partition):
+        return _failed_camera_checks(dg.build_asset_context(partition_key=partition, instance=instance))
+
+    assert flags(BELOW) == "focal_constrained,rig_geometry" and flags(LOOSE) == "focal_constrained"
+    assert flags("toy__never") == "unchecked"  # no recorded checks is not a pass
+    rig = _calibration(BELOW).cameras
+    rows = camera_metrics_table("toy", "below", rig, rig, failed_checks=flags(BELOW))
+    assert set(rows["failed_checks"]) == {"focal_constrained,rig_geometry"} and len(rows) > 3
+    cli._print_metrics(rows.drop(columns="view"), "md")
+    assert "focal_constrained,rig_geometry" in capsys.readouterr().out
+    cli._print_metrics(rows.assign(failed_checks="").drop(columns="view"), "md")
+    assert "failed_checks" not in capsys.readouterr().out
