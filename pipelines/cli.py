@@ -79,6 +79,8 @@ def _print_metrics(table, fmt: str) -> None:
     if "failed_checks" in table.columns:  # shown only where some figure comes from cameras that failed a check
         flags = table["failed_checks"].fillna("")
         table = table.assign(failed_checks=flags) if (flags != "").any() else table.drop(columns="failed_checks")
+    if "view" in table.columns:  # per-view rows show their view, the others nothing (not "<NA>")
+        table = table.assign(view=table["view"].astype("object").where(table["view"].notna(), ""))
     sys.stdout.write(table.to_markdown(index=False, floatfmt=".2f") + "\n")
 
 
