@@ -124,22 +124,10 @@ class _Graph:
         return (self.specs[key].metadata or {}).get(ON_REQUEST_KEY)
 
     def with_descendants(self, keys: Iterable[dg.AssetKey]) -> set[dg.AssetKey]:
-        out, todo = set(), list(keys)
-        while todo:
-            key = todo.pop()
-            if key not in out:
-                out.add(key)
-                todo.extend(self.children[key])
-        return out
+        return _closure(keys, self.children)
 
     def with_ancestors(self, keys: Iterable[dg.AssetKey]) -> set[dg.AssetKey]:
-        out, todo = set(), list(keys)
-        while todo:
-            key = todo.pop()
-            if key not in out:
-                out.add(key)
-                todo.extend(self.parents[key])
-        return out
+        return _closure(keys, self.parents)
 
     def sorted_keys(self) -> list[dg.AssetKey]:
         return sorted(self.specs, key=lambda k: k.to_user_string())
@@ -482,3 +470,14 @@ def _first_line(event) -> str:
     if error is None:
         return f"step {event.step_key} failed"
     return f"{event.step_key}: {error.cls_name}: {error.message.strip().splitlines()[0]}"
+
+
+def _closure(keys: Iterable[dg.AssetKey], edges: dict) -> set[dg.AssetKey]:
+    """``keys`` and every asset reachable from them along ``edges`` (key -> neighbours)."""
+    out, todo = set(), list(keys)
+    while todo:
+        key = todo.pop()
+        if key not in out:
+            out.add(key)
+            todo.extend(edges[key])
+    return out

@@ -56,7 +56,8 @@ class ActiveLifter:
     def describe(self) -> str:
         """One line for logs: which weights, their digest and held-out figure."""
         pa = self.info.get("val_pa_mpjpe_mm")
-        figure = f", held-out PA-MPJPE {pa:.1f} mm" if isinstance(pa, (int, float)) else ""
+        held_out = self.info.get("val_subjects", "?")
+        figure = f", PA-MPJPE {pa:.1f} mm on held-out subjects {held_out}" if isinstance(pa, (int, float)) else ""
         what = "the lifter shipped with humancal" if self.source == "shipped" else f"the lifter trained here ({self.path})"
         return f"lifter: {what}, digest {self.digest[:12]}, trained on CMU subjects {self.info.get('train_subjects', '?')}{figure}"
 
@@ -89,9 +90,11 @@ def active_lifter(storage_root: str | UPath) -> ActiveLifter:
         }
         return ActiveLifter("trained", trained, checkpoint_digest(checkpoint), info)
     shipped = shipped_info()
+    # the held-out report of the sidecar (20,000 fresh samples) when present, else the training's validation
+    held_out = (shipped.get("held_out") or {}).get("all") or shipped.get("val_metrics") or {}
     info = {
         "train_subjects": ", ".join(shipped["train_subjects"]),
         "val_subjects": ", ".join(shipped["val_subjects"]),
-        "val_pa_mpjpe_mm": (shipped.get("val_metrics") or {}).get("pa_mpjpe_mm"),
+        "val_pa_mpjpe_mm": held_out.get("pa_mpjpe_mm"),
     }
     return ActiveLifter("shipped", SHIPPED_LIFTER_STEM.with_suffix(".safetensors"), shipped["digest"], info)
