@@ -28,7 +28,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix, diags, hstack
 
-from humancal.calibration.types import LiftedPoses
+from humancal.calibration.types import CalibrationError, LiftedPoses
 from humancal.detections import DenseDetections
 
 __all__ = [
@@ -187,7 +187,13 @@ def solve_focals_translations(
         :class:`FocalTranslationSolution`.
     """
     V = len(R_cam_from_world)
-    ok = np.isfinite(roots.T_cam_m[rows_a, 0]) & np.isfinite(roots.T_cam_m[rows_b, 0])
+    # a pair enters only with finite roots and a positive std: one non-finite entry would make the whole normal
+    # matrix non-finite, and LAPACK's least squares then fails ("SVD did not converge") instead of ignoring it
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = np.isfinite(roots.T_cam_m).all(1) & np.isfinite(roots.zeta_m_per_px)
+        depth = 0.5 * (roots.T_cam_m[rows_a, 2] + roots.T_cam_m[rows_b, 2])
+        ok = finite[rows_a] & finite[rows_b] & np.isfinite(floor_std_m + depth_rel_std * depth) & (
+            floor_std_m + depth_rel_std * depth > 0)
     ra, rb = rows_a[ok], rows_b[ok]
     va, vb = view[ra], view[rb]
     M = len(ra)
@@ -245,7 +251,7 @@ def solve_focals_translations(
             if not estimate_scale:
                 data_normal = (Ps.T @ diags(w2) @ Ps).toarray()
                 normal = data_normal + E_normal
-                y = np.linalg.lstsq(normal, Ps.T @ (w2 * rhs.ravel()) + E_rhs, rcond=None)[0]
+                y = _least_squares(normal, Ps.T @ (w2 * rhs.ravel()) + E_rhs, V)
                 reduced_data = data_normal
             else:
                 # one Gauss-Newton step in (y, log q), the pair scales eliminated (each is a scalar block)
@@ -263,7 +269,7 @@ def solve_focals_translations(
                 g_q = Jq.T @ (w2 * r) + prior_s * log_q
                 reduced_data = data_normal - (H_xq / h_q) @ H_xq.T
                 normal = reduced_data + E_normal
-                dy = np.linalg.lstsq(normal, -(g_x - H_xq @ (g_q / h_q)), rcond=None)[0]
+                dy = _least_squares(normal, -(g_x - H_xq @ (g_q / h_q)), V)
                 dq = -(g_q + H_xq.T @ dy) / h_q
                 y = y + dy
                 log_q = log_q + np.clip(dq, -0.3, 0.3)
@@ -300,6 +306,22 @@ def solve_focals_translations(
     pair_scale = np.ones(len(rows_a))
     pair_scale[ok] = np.exp(-log_q)
     return FocalTranslationSolution(focal, t, residual, inlier, f_std, f_std_data, pair_scale)
+
+
+def _least_squares(normal: np.ndarray, rhs: np.ndarray, num_views: int) -> np.ndarray:
+    """Minimum-norm solution of the (n, n) normal equations of :func:`solve_focals_translations`.
+
+    A singular system (a view without pairs leaves its translation free) is fine for ``lstsq``; a non-finite one
+    is not (LAPACK's SVD does not converge): it raises :class:`CalibrationError` naming the views whose focal
+    (column ``v``) or translation (columns ``V + 3 v ..``) carries the non-finite entries.
+    """
+    bad_columns = ~(np.isfinite(normal).all(0) & np.isfinite(rhs))
+    if bad_columns.any():
+        cols = np.flatnonzero(bad_columns)
+        views = sorted({int(c) if c < num_views else int((c - num_views) // 3) for c in cols})
+        raise CalibrationError(f"linear focal and translation solve: views {views} have non-finite equations "
+                               "(their people's root positions are not finite)")
+    return np.linalg.lstsq(normal, rhs, rcond=None)[0]
 
 
 def resect_focal_translation(
