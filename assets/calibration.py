@@ -33,6 +33,13 @@ def _calibration_inputs(detections: pd.DataFrame):
     return lifted_from_table(detections)
 
 
+def _view_names(views: pd.DataFrame, num_views: int) -> list[str] | None:
+    """The views' names in view order, for the calibration's messages (None when the table does not name them)."""
+    if not {"view", "name"} <= set(views.columns) or len(views) != num_views:
+        return None
+    return views.sort_values("view")["name"].astype(str).tolist()
+
+
 def _image_sizes(views: pd.DataFrame) -> list[tuple[int, int]]:
     rows = views.sort_values("view")
     return list(zip(rows["width_px"].astype(int), rows["height_px"].astype(int)))
@@ -152,7 +159,9 @@ def extrinsics(
     start = time.perf_counter()
     dense, lifted = _calibration_inputs(detections)
     with _single_threaded_blas():
-        result = estimate_extrinsics(dense, lifted, intrinsics_from_table(intrinsics), config.to_library())
+        estimates = intrinsics_from_table(intrinsics)
+        result = estimate_extrinsics(dense, lifted, estimates, config.to_library(),
+                                     view_names=_view_names(views, len(estimates)))
     table = cameras_to_table(result.cameras, context.partition_key)
     seconds = time.perf_counter() - start
     floor = result.diagnostics.floor

@@ -224,7 +224,7 @@ def _resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, bounds, vi
     return f_new, t_new, accepted
 
 
-def _rotations(detections, lifted, V, rng, config):
+def _rotations(detections, lifted, V, rng, config, view_names):
     """Consensus pair rotations (hypothesis budget spread over the view pairs) and their average."""
     n_pairs = V * (V - 1) // 2
     per_view_dets = np.bincount(detections.view, minlength=V)
@@ -234,11 +234,62 @@ def _rotations(detections, lifted, V, rng, config):
     max_frames = int(max(20, min(config.max_frames_per_pair, budget)))
     pairs = pairwise_rotations(detections, lifted, V, rng, max_frames=max_frames,
                                max_pose_error_m=config.max_pose_error_m, threshold_deg=config.rotation_threshold_deg)
+    _check_view_graph(pairs, V, config.min_pair_support, view_names)
     R, residual_deg = average_rotations(pairs, V, min_support=config.min_pair_support)
     used = [p for p in pairs if p.support >= config.min_pair_support]
     rows_a = np.concatenate([p.rows_a for p in used])
     rows_b = np.concatenate([p.rows_b for p in used])
     return R, residual_deg, pairs, rows_a, rows_b
+
+
+def _view_components(pairs, num_views: int, min_support: int) -> list[list[int]]:
+    """Connected components of the view graph (an edge: a view pair with ``min_support`` consistently matched
+    detections), largest first (ties: the one holding the lowest view first)."""
+    parent = list(range(num_views))
+
+    def root(v):
+        while parent[v] != v:
+            parent[v] = parent[parent[v]]
+            v = parent[v]
+        return v
+
+    for p in pairs:
+        if p.support >= min_support:
+            a, b = root(p.view_a), root(p.view_b)
+            parent[max(a, b)] = min(a, b)
+    components: dict[int, list[int]] = {}
+    for v in range(num_views):
+        components.setdefault(root(v), []).append(v)
+    return sorted(components.values(), key=lambda c: (-len(c), c[0]))
+
+
+def _check_view_graph(pairs, num_views, min_support, view_names) -> None:
+    """Raise :class:`CalibrationError` naming the views outside the largest connected part of the view graph.
+
+    One solve cannot place views that share no matched people with the others (no relative rotation, translation
+    or scale ties them to the rest): they are named, with whether they match nobody at all or form a group of
+    their own, so that the user can remove them or calibrate that group separately.
+    """
+    components = _view_components(pairs, num_views, min_support)
+    if len(components) == 1:
+        return
+    names = view_names or [f"view {v}" for v in range(num_views)]
+
+    def label(v):
+        return names[v] if view_names is None else f"{names[v]!r} (view {v})"
+
+    alone = [v for c in components[1:] for v in c if len(c) == 1]
+    apart = [c for c in components[1:] if len(c) > 1]
+    parts = []
+    if alone:
+        parts.append(f"{', '.join(label(v) for v in alone)} match no person seen by the other views")
+    for c in apart:
+        parts.append(f"{', '.join(label(v) for v in c)} share people only among themselves")
+    raise CalibrationError(
+        f"extrinsics, rotations: {'; '.join(parts)} (at least {min_support} consistent detection pairs link two "
+        f"views; the connected views are {', '.join(label(v) for v in components[0])}): views that share no people "
+        "with the others cannot be placed in one solve; remove them or calibrate them separately"
+    )
 
 
 def _linear(detections, lifted, rows_a, rows_b, R, f0, prior_rel, pp, diag, config):
@@ -347,6 +398,8 @@ def estimate_extrinsics(
     lifted: LiftedPoses,
     intrinsics: Sequence[IntrinsicsEstimate],
     config: ExtrinsicsConfig | None = None,
+    *,
+    view_names: Sequence[str] | None = None,
 ) -> ExtrinsicsEstimate:
     """Extrinsics of all views, with focal lengths refined (and recovered where single views fail).
 
@@ -357,18 +410,24 @@ def estimate_extrinsics(
         intrinsics: the single-view estimates of :func:`~humancal.calibration.intrinsics.estimate_intrinsics`,
             one per view in view order (``status`` ``"no_upright"`` allowed: its focal is recovered here).
         config: settings; defaults to :class:`ExtrinsicsConfig`.
+        view_names: the views' names in view order (e.g. camera folders), used in the error messages.
 
     Returns:
         :class:`ExtrinsicsEstimate`: cameras in the world frame (Z up, floor z = 0 unless ``align_floor`` is off;
         camera 0's frame otherwise), metres.
 
     Raises:
-        CalibrationError: fewer than two views, a view without detections, a view sharing no matched people
-            with the others, or too few matched standing people for the floor.
+        CalibrationError: fewer than two views, a view without detections, views sharing no matched people
+            with the others (all views outside the largest connected part of the view graph are named), a
+            numerical failure (naming the stage and, where known, the views), or too few matched standing people
+            for the floor.
         ValueError: inconsistent inputs.
     """
     config = config or ExtrinsicsConfig()
     V = _check_inputs(detections, lifted, intrinsics)
+    if view_names is not None and len(view_names) != V:
+        raise ValueError(f"view_names must name the {V} views in order, got {len(view_names)} names")
+    view_names = None if view_names is None else [str(n) for n in view_names]
     rng = np.random.default_rng(config.seed)
     timings: dict[str, float] = {}
 
@@ -383,7 +442,7 @@ def estimate_extrinsics(
     for attempt in range(2 if lifted.frame == "crop" else 1):
         clock = time.perf_counter()
         with _stage("rotations"):
-            R, residual_deg, pairs, rows_a, rows_b = _rotations(detections, lifted_cam, V, rng, config)
+            R, residual_deg, pairs, rows_a, rows_b = _rotations(detections, lifted_cam, V, rng, config, view_names)
         _require_finite(R.reshape(V, -1), "rotations")
         timings["rotations"] = timings.get("rotations", 0.0) + time.perf_counter() - clock
         clock = time.perf_counter()
@@ -491,7 +550,8 @@ def estimate_extrinsics(
         "group": np.repeat(np.arange(len(groups)), [len(g) for g in groups]),
     })
     diagnostics = ExtrinsicsDiagnostics(per_view, pair_table, group_table, floor, ba.inlier_fraction, timings)
-    logger.info("extrinsics: %d views, %d groups, timings %s", V, len(groups),
+    logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
+                len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})
     return ExtrinsicsEstimate(cameras, diagnostics)
 

@@ -55,7 +55,8 @@ def defs(tmp_path, monkeypatch):
     """Toy inputs -> the real extrinsics asset -> a toy reader, stored by a pickling IO manager."""
     monkeypatch.setattr(calibration, "_calibration_inputs", lambda detections: (None, None))
     monkeypatch.setattr(calibration, "intrinsics_from_table", lambda table: table["sequence"].iloc[0])
-    monkeypatch.setattr(calibration, "estimate_extrinsics", lambda dense, lifted, partition, config: _calibration(partition))
+    monkeypatch.setattr(calibration, "estimate_extrinsics",
+                        lambda dense, lifted, partition, config, **names: _calibration(partition))
     monkeypatch.setattr(calibration, "plot_rigs", lambda *args, **kwargs: Path(args[3]).write_bytes(b"png") and args[3])
 
     def toy(name):
