@@ -263,11 +263,11 @@ def solve_focals_translations(
                 Jq = coo_matrix((jq.ravel(), (np.arange(3 * M), np.repeat(np.arange(M), 3))),
                                 shape=(3 * M, M)).tocsr()
                 data_normal = (Jx.T @ diags(w2) @ Jx).toarray()
-                H_xq = (Jx.T @ diags(w2) @ Jq).toarray()  # (n, M)
+                H_xq = (Jx.T @ diags(w2) @ Jq).tocsr()  # (n, M), at most 8 entries per pair: kept sparse
                 h_q = (w2.reshape(M, 3) * jq**2).sum(1) + prior_s
                 g_x = Jx.T @ (w2 * r) + E_normal @ y - E_rhs
                 g_q = Jq.T @ (w2 * r) + prior_s * log_q
-                reduced_data = data_normal - (H_xq / h_q) @ H_xq.T
+                reduced_data = data_normal - (H_xq @ diags(1.0 / h_q) @ H_xq.T).toarray()
                 normal = reduced_data + E_normal
                 dy = _least_squares(normal, -(g_x - H_xq @ (g_q / h_q)), V)
                 dq = -(g_q + H_xq.T @ dy) / h_q
