@@ -4,7 +4,8 @@ Steps (each in its own module):
 
 1. relative rotations from Procrustes alignment of lifted poses over all candidate detection pairs of each
    frame, with a consensus over many frames, then rotation averaging (camera 0 = identity)
-   (:mod:`.rotation_consensus`);
+   (:mod:`.rotation_consensus`); views outside the largest connected part of the view graph are named
+   (:mod:`.view_graph`);
 2. root positions per detection by a translation-only PnP, then one solve of all translations *and* focal
    lengths from the candidate pairs (linear, then with a size factor per pair for the lifter's per-person size
    errors), Cauchy-reweighted so wrong pairs drop out (:mod:`.translations`); repeated a few times because the
@@ -13,7 +14,8 @@ Steps (each in its own module):
 4. a bundle adjustment over focal lengths, rotations, translations and the groups' keypoints, with the lifted
    poses as a shape prior up to a size factor per group (:mod:`.multiview_focal`): this recovers the focal
    lengths that single views cannot observe (level or straight-down cameras) and removes the bias of the linear
-   solve;
+   solve; views the linear solve cannot see start from a resection or the other views' field of view
+   (:mod:`.blind_views`);
 5. the final world frame: Z up, floor at z = 0 from the standing people (:mod:`.floor`).
 """
 
@@ -28,13 +30,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
+from humancal.calibration.blind_views import blind_views, other_views_focal, resection_pass, translations_from_others
 from humancal.calibration.floor import FloorAlignment, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.matching import groups_from_pairs
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
-from humancal.calibration.translations import resect_focal_translation, root_positions, solve_focals_translations
+from humancal.calibration.translations import root_positions, solve_focals_translations
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted
+from humancal.calibration.view_graph import check_view_graph
 from humancal.camera import Camera
 from humancal.detections import DenseDetections
 from humancal.lifter.pose_cues import standing_score
@@ -188,42 +192,6 @@ def _initial_focals(intrinsics, config):
     return f, np.where(ok, rel, np.inf), diag
 
 
-def _resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, bounds, views):
-    """Re-estimate the focal and translation of ``views`` from the people placed by the other views.
-
-    A resection is accepted only when its focal lies within the plausible ``bounds`` ((V, 2), pixels) and it and
-    the translation are finite (``accepted``); the other views keep ``f`` and ``t``.
-
-    The linear solve sees a view's focal only through the spread of its people's depths, which vanishes for a
-    camera looking straight down (all people at about the same depth) and is attenuated by depth noise;
-    resection uses the perspective of the 3D keypoints instead.
-    """
-    view = detections.view
-    Rt = np.transpose(R, (0, 2, 1))
-    f_new, t_new = f.copy(), t.copy()
-    accepted = np.zeros(len(f), bool)
-    for v in views:
-        X, x, w = [], [], []
-        for g in groups:
-            mine = g[view[g] == v]
-            others = g[view[g] != v]
-            if len(mine) != 1 or len(others) == 0:
-                continue
-            d = mine[0]
-            world = np.mean([Rt[view[o]] @ (lifted.joints_cam_m[o] + roots_T[o] - t[view[o]]).T for o in others],
-                            axis=0).T
-            X.append(world)
-            x.append(detections.keypoints_px[d])
-            w.append(np.where(detections.scores[d] >= 0.3, detections.scores[d], 0.0))
-        if len(X) < 3:
-            continue
-        fv, tv, _ = resect_focal_translation(np.concatenate(X), np.concatenate(x), np.concatenate(w), R[v], pp[v])
-        if np.isfinite(fv) and bounds[v, 0] <= fv <= bounds[v, 1] and np.isfinite(tv).all():
-            f_new[v], t_new[v] = fv, tv
-            accepted[v] = True
-    return f_new, t_new, accepted
-
-
 def _rotations(detections, lifted, V, rng, config, view_names):
     """Consensus pair rotations (hypothesis budget spread over the view pairs) and their average."""
     n_pairs = V * (V - 1) // 2
@@ -234,62 +202,12 @@ def _rotations(detections, lifted, V, rng, config, view_names):
     max_frames = int(max(20, min(config.max_frames_per_pair, budget)))
     pairs = pairwise_rotations(detections, lifted, V, rng, max_frames=max_frames,
                                max_pose_error_m=config.max_pose_error_m, threshold_deg=config.rotation_threshold_deg)
-    _check_view_graph(pairs, V, config.min_pair_support, view_names)
+    check_view_graph(pairs, V, config.min_pair_support, view_names)
     R, residual_deg = average_rotations(pairs, V, min_support=config.min_pair_support)
     used = [p for p in pairs if p.support >= config.min_pair_support]
     rows_a = np.concatenate([p.rows_a for p in used])
     rows_b = np.concatenate([p.rows_b for p in used])
     return R, residual_deg, pairs, rows_a, rows_b
-
-
-def _view_components(pairs, num_views: int, min_support: int) -> list[list[int]]:
-    """Connected components of the view graph (an edge: a view pair with ``min_support`` consistently matched
-    detections), largest first (ties: the one holding the lowest view first)."""
-    parent = list(range(num_views))
-
-    def root(v):
-        while parent[v] != v:
-            parent[v] = parent[parent[v]]
-            v = parent[v]
-        return v
-
-    for p in pairs:
-        if p.support >= min_support:
-            a, b = root(p.view_a), root(p.view_b)
-            parent[max(a, b)] = min(a, b)
-    components: dict[int, list[int]] = {}
-    for v in range(num_views):
-        components.setdefault(root(v), []).append(v)
-    return sorted(components.values(), key=lambda c: (-len(c), c[0]))
-
-
-def _check_view_graph(pairs, num_views, min_support, view_names) -> None:
-    """Raise :class:`CalibrationError` naming the views outside the largest connected part of the view graph.
-
-    One solve cannot place views that share no matched people with the others (no relative rotation, translation
-    or scale ties them to the rest): they are named, with whether they match nobody at all or form a group of
-    their own, so that the user can remove them or calibrate that group separately.
-    """
-    components = _view_components(pairs, num_views, min_support)
-    if len(components) == 1:
-        return
-    names = view_names or [f"view {v}" for v in range(num_views)]
-
-    def label(v):
-        return names[v] if view_names is None else f"{names[v]!r} (view {v})"
-
-    alone = [v for c in components[1:] for v in c if len(c) == 1]
-    apart = [c for c in components[1:] if len(c) > 1]
-    parts = []
-    if alone:
-        parts.append(f"{', '.join(label(v) for v in alone)} match no person seen by the other views")
-    for c in apart:
-        parts.append(f"{', '.join(label(v) for v in c)} share people only among themselves")
-    raise CalibrationError(
-        f"extrinsics, rotations: {'; '.join(parts)} (at least {min_support} consistent detection pairs link two "
-        f"views; the connected views are {', '.join(label(v) for v in components[0])}): views that share no people "
-        "with the others cannot be placed in one solve; remove them or calibrate them separately"
-    )
 
 
 def _linear(detections, lifted, rows_a, rows_b, R, f0, prior_rel, pp, diag, config):
@@ -315,45 +233,6 @@ def _linear(detections, lifted, rows_a, rows_b, R, f0, prior_rel, pp, diag, conf
         if converged:
             break
     return f, sol, root_positions(detections, lifted, _K(f, f, pp)), undetermined
-
-
-def _blind_views(f, sol, undetermined, bounds, diag, config) -> np.ndarray:
-    """Views whose linear focal is no estimate: non-positive or non-finite in the last solve, at an end of the
-    linear range (a clamp), outside the plausible field of view, or with a large data-only std."""
-    lo, hi = config.focal_range_rel[0] * diag, config.focal_range_rel[1] * diag
-    with np.errstate(invalid="ignore"):
-        return (undetermined | ~np.isfinite(sol.focal_rel_std_data) | (sol.focal_rel_std_data > config.linear_max_rel_std)
-                | (f <= lo * 1.01) | (f >= hi * 0.99) | (f < bounds[:, 0]) | (f > bounds[:, 1]))
-
-
-def _other_views_focal(f, blind, widths, f0, bounds) -> np.ndarray:
-    """(V,) starting focal of every view from the median field of view (focal over image width) of the views that
-    are not ``blind``; without any, the initial (single-view or typical) focal; inside the plausible bounds."""
-    if (~blind).any():
-        start = float(np.median(f[~blind] / widths[~blind])) * widths
-    else:
-        start = f0.astype(float)
-    return np.clip(start, bounds[:, 0], bounds[:, 1])
-
-
-def _translations_from_others(groups, detections, lifted, roots_T, R, t, views) -> np.ndarray:
-    """(V, 3) translations of ``views`` that put their people's roots (at their current focal) where the other
-    views place them: per view the median over groups of ``T_cam - R X_root``; the other rows keep ``t``."""
-    view = detections.view
-    Rt = np.transpose(R, (0, 2, 1))
-    t_new = t.copy()
-    for v in views:
-        offsets = []
-        for g in groups:
-            mine, others = g[view[g] == v], g[view[g] != v]
-            if len(mine) != 1 or len(others) == 0 or not np.isfinite(roots_T[mine[0]]).all():
-                continue
-            world = [Rt[view[o]] @ (roots_T[o] - t[view[o]]) for o in others if np.isfinite(roots_T[o]).all()]
-            if world:
-                offsets.append(roots_T[mine[0]] - R[v] @ np.mean(world, axis=0))
-        if offsets:
-            t_new[v] = np.median(offsets, axis=0)
-    return t_new
 
 
 @contextmanager
@@ -454,8 +333,8 @@ def estimate_extrinsics(
         # views the linear solve cannot see (a non-positive focal, one at the end of the range or outside the
         # plausible field of view, or a large data-only std) must not start anything from that value (it is a
         # clamp, not an estimate): they start from the other views' field of view, then a resection
-        blind = _blind_views(f, sol, undetermined, bounds, diag, config)
-        f = np.where(blind, _other_views_focal(f, blind, widths, f0, bounds), f)
+        blind = blind_views(f, sol, undetermined, bounds, diag, config)
+        f = np.where(blind, other_views_focal(f, blind, widths, f0, bounds), f)
         if lifted.frame != "crop" or np.max(np.abs(np.log(f / f_frame))) < 0.05 or attempt == 1:
             break
         f_frame = f.copy()
@@ -471,7 +350,7 @@ def estimate_extrinsics(
     resected = np.zeros(V, bool)
     if blind.any():
         with _stage("resection"):
-            f_res, t_res, resected = _resection_pass(groups, detections, lifted, np.nan_to_num(roots.T_cam_m), R,
+            f_res, t_res, resected = resection_pass(groups, detections, lifted, np.nan_to_num(roots.T_cam_m), R,
                                                      t_init, f, pp, bounds, np.flatnonzero(blind))
             f = np.where(resected, f_res, f)
             t_init[resected] = t_res[resected]
@@ -479,7 +358,7 @@ def estimate_extrinsics(
             others = blind & ~resected
             if others.any():
                 roots_f = root_positions(detections, lifted, _K(f, f, pp))
-                t_init[others] = _translations_from_others(groups, detections, lifted, roots_f.T_cam_m, R, t_init,
+                t_init[others] = translations_from_others(groups, detections, lifted, roots_f.T_cam_m, R, t_init,
                                                            np.flatnonzero(others))[others]
         logger.info("views %s: the linear focal %s is not an estimate (data-only std %s); started from %s px (%s)",
                     np.flatnonzero(blind).tolist(), np.round(f_linear[blind]).tolist(),

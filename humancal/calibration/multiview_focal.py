@@ -13,9 +13,10 @@ Residuals (all in units of their standard deviation):
 * optional priors on the log focal lengths (from the single-view estimates, weighted by their uncertainty).
 
 Reprojection and shape residuals are robustified with Huber weights (iteratively reweighted). The solver is
-Levenberg-Marquardt on the normal equations with the Schur complement over the per-group point blocks, so
-the cost grows linearly with the number of groups (scipy's ``least_squares`` solves the reduced camera system
-with an iterative sparse solver that does not exploit the 70 x 70 point blocks: the direct Schur solve is kept).
+Levenberg-Marquardt on the normal equations with the Schur complement over the per-group point blocks (the
+residuals and normal equations live in :mod:`.bundle_terms`), so the cost grows linearly with the number of
+groups (scipy's ``least_squares`` solves the reduced camera system with an iterative sparse solver that does not
+exploit the 70 x 70 point blocks: the direct Schur solve is kept).
 
 The solver cannot diverge:
 
@@ -39,17 +40,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from humancal.calibration.bundle_terms import (
+    _Problem,
+    _log_focal,
+    _focal_parameters,
+    _unpack,
+    _residuals,
+    _robust_cost,
+    _normal_equations,
+    _solve,
+)
 from humancal.calibration.types import CalibrationError
 from humancal.lifter.lifted import LiftedPoses
 from humancal.detections import DenseDetections
 from humancal.geometry.rotations import rotvec_to_rotmat
-from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
 
 __all__ = ["BundleResult", "bundle_adjust", "focal_bounds_from_fov"]
 
 logger = logging.getLogger(__name__)
 
-_LHIP, _RHIP = JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]
 
 
 @dataclass(frozen=True)
@@ -107,247 +116,6 @@ def focal_bounds_from_fov(width_px: np.ndarray, fov_range_deg: tuple[float, floa
         raise ValueError(f"width_px must be positive and finite, got {w}")
     half = 0.5 * w
     return np.stack([half / np.tan(np.radians(hi_deg) / 2), half / np.tan(np.radians(lo_deg) / 2)], -1)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    K = np.zeros(v.shape[:-1] + (3, 3))
-    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
-    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
-    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
-    return K
-
-
-@dataclass
-class _Problem:
-    V: int
-    G: int
-    square: bool
-    # reprojection observations
-    o_group: np.ndarray
-    o_view: np.ndarray
-    o_joint: np.ndarray
-    o_px: np.ndarray  # (O, 2) relative to the principal point
-    o_w: np.ndarray  # (O,) 1 / std
-    # shape observations: one lifted pose per (group, detection)
-    s_group: np.ndarray
-    s_view: np.ndarray
-    s_joints: np.ndarray  # (S, 23, 3)
-    shape_w: np.ndarray  # (S, 23) 1 / std, 0 for joints without a finite lifted pose
-    # focal bounds: log f = log_f_mid + log_f_half * tanh(u)
-    log_f_mid: np.ndarray  # (V,)
-    log_f_half: np.ndarray  # (V,)
-    # focal priors
-    prior_log_f: np.ndarray  # (V,)
-    prior_w: np.ndarray  # (V,), 0 for none
-    huber: float
-    # per-group scale of the lifted poses (log q, q = lifted size / true size): prior weight, or fixed at 0
-    scale_w: float = 0.0
-    free_scale: bool = False
-
-
-def _camera_params(p: _Problem) -> int:
-    return (1 if p.square else 2) + 6
-
-
-def _log_focal(p: _Problem, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Log focal lengths from the bounded parameters ``u`` (V, nf), and ``d log f / d u``."""
-    th = np.tanh(u)
-    return p.log_f_mid[:, None] + p.log_f_half[:, None] * th, p.log_f_half[:, None] * (1.0 - th**2)
-
-
-def _focal_parameters(p: _Problem, log_f: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`_log_focal`, starting values kept inside 90 % of the range (the gradient vanishes at the
-    bounds)."""
-    return np.arctanh(np.clip((log_f - p.log_f_mid[:, None]) / p.log_f_half[:, None], -0.9, 0.9))
-
-
-def _unpack(p: _Problem, cams: np.ndarray, R0: np.ndarray):
-    nf = 1 if p.square else 2
-    log_f, _ = _log_focal(p, cams[:, :nf])
-    fx = np.exp(log_f[:, 0])
-    fy = fx if p.square else np.exp(log_f[:, 1])
-    R = rotvec_to_rotmat(cams[:, nf : nf + 3]) @ R0
-    t = cams[:, nf + 3 : nf + 6]
-    return fx, fy, R, t
-
-
-def _residuals(p: _Problem, cams, R0, X, log_q):
-    """Reprojection (O, 2), shape (S, 23, 3), focal prior (V,), scale prior (G,) residuals, all whitened."""
-    fx, fy, R, t = _unpack(p, cams, R0)
-    P = np.einsum("oij,oj->oi", R[p.o_view], X[p.o_group, p.o_joint]) + t[p.o_view]
-    z = np.where(P[:, 2] > 1e-6, P[:, 2], 1.0)
-    proj = np.stack([fx[p.o_view] * P[:, 0] / z, fy[p.o_view] * P[:, 1] / z], -1)
-    r_obs = (proj - p.o_px) * p.o_w[:, None]
-    r_obs[P[:, 2] <= 1e-6] = 1e3  # behind the camera
-    rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
-    q = np.exp(log_q)[p.s_group, None, None]
-    r_shape = (q * (rel @ R[p.s_view].transpose(0, 2, 1)) - p.s_joints) * p.shape_w[..., None]
-    nf = 1 if p.square else 2
-    r_prior = (_log_focal(p, cams[:, :nf])[0].mean(1) - p.prior_log_f) * p.prior_w
-    r_scale = log_q * p.scale_w
-    return r_obs, r_shape, r_prior, r_scale, (fx, fy, R, t, P)
-
-
-def _huber_weights(norms: np.ndarray, k: float) -> np.ndarray:
-    return np.where(norms <= k, 1.0, k / np.maximum(norms, 1e-12))
-
-
-def _robust_cost(r_obs, r_shape, r_prior, r_scale, k):
-    def rho(n):
-        return np.where(n <= k, n**2, 2 * k * n - k**2)
-
-    return float(rho(np.linalg.norm(r_obs, axis=1)).sum() + rho(np.linalg.norm(r_shape, axis=2)).sum()
-                 + (r_prior**2).sum() + (r_scale**2).sum())
-
-
-def _scatter_blocks(target: np.ndarray, index: np.ndarray, blocks: np.ndarray) -> None:
-    """``target[index[s]] += blocks[s]`` with repeated indices summed (bincount over flat positions)."""
-    size = int(np.prod(target.shape[1:]))
-    flat = index[:, None] * size + np.arange(size)
-    target += np.bincount(flat.ravel(), blocks.reshape(len(index), -1).ravel(), minlength=target.size).reshape(
-        target.shape)
-
-
-def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
-    """Gauss-Newton blocks: Hcc (V, nc, nc), Hcp (G, V, nc, 3J + 1), Hpp (G, 3J + 1, 3J + 1), gc (V, nc),
-    gp (G, 3J + 1); the last point parameter of a group is its log scale ``log q``."""
-    nc = _camera_params(p)
-    nf = 1 if p.square else 2
-    J3 = 3 * NUM_JOINTS
-    r_obs, r_shape, r_prior, r_scale, (fx, fy, R, t, P) = _residuals(p, cams, R0, X, log_q)
-    w_obs = _huber_weights(np.linalg.norm(r_obs, axis=1), p.huber)
-    w_shape = _huber_weights(np.linalg.norm(r_shape, axis=2), p.huber)  # (S, 23)
-
-    # --- reprojection: d r / d P (2x3), then chain to camera and point parameters
-    v, O = p.o_view, len(p.o_view)
-    behind = P[:, 2] <= 1e-6  # their residual is a constant penalty: no gradient
-    z = np.where(behind, 1.0, P[:, 2])
-    dP = np.zeros((O, 2, 3))
-    dP[:, 0, 0] = fx[v] / z
-    dP[:, 0, 2] = -fx[v] * P[:, 0] / z**2
-    dP[:, 1, 1] = fy[v] / z
-    dP[:, 1, 2] = -fy[v] * P[:, 1] / z**2
-    scale = (np.where(behind, 0.0, p.o_w) * np.sqrt(w_obs))[:, None, None]
-    dP *= scale
-    Jc = np.zeros((O, 2, nc))
-    if p.square:
-        Jc[:, 0, 0] = fx[v] * P[:, 0] / z * scale[:, 0, 0]
-        Jc[:, 1, 0] = fy[v] * P[:, 1] / z * scale[:, 0, 0]
-    else:
-        Jc[:, 0, 0] = fx[v] * P[:, 0] / z * scale[:, 0, 0]
-        Jc[:, 1, 1] = fy[v] * P[:, 1] / z * scale[:, 0, 0]
-    _, dlogf = _log_focal(p, cams[:, :nf])  # (V, nf)
-    Jc[:, :, :nf] *= dlogf[v][:, None, :]
-    RX = P - t[v]
-    Jc[:, :, nf : nf + 3] = -dP @ _skew(RX)
-    Jc[:, :, nf + 3 : nf + 6] = dP
-    Jp = dP @ R[v]  # (O, 2, 3)
-    r = r_obs * np.sqrt(w_obs)[:, None]
-
-    Hcc = np.zeros((p.V, nc, nc))
-    _scatter_blocks(Hcc, v, Jc.transpose(0, 2, 1) @ Jc)
-    gc = np.zeros((p.V, nc))
-    _scatter_blocks(gc, v, np.einsum("ori,or->oi", Jc, r))
-    Hcp = np.zeros((p.G, p.V, nc, J3))
-    cols = 3 * p.o_joint[:, None] + np.arange(3)
-    blk = Jc.transpose(0, 2, 1) @ Jp  # (O, nc, 3)
-    flat = ((p.o_group * p.V + v)[:, None, None] * nc + np.arange(nc)[None, :, None]) * J3 + cols[:, None, :]
-    Hcp += np.bincount(flat.ravel(), blk.ravel(), minlength=Hcp.size).reshape(Hcp.shape)
-    Hpp = np.zeros((p.G, J3, J3))
-    pp = Jp.transpose(0, 2, 1) @ Jp
-    flat = (p.o_group[:, None, None] * J3 + cols[:, :, None]) * J3 + cols[:, None, :]
-    Hpp += np.bincount(flat.ravel(), pp.ravel(), minlength=p.G * J3 * J3).reshape(p.G, J3, J3)
-    gp = np.bincount((p.o_group[:, None] * J3 + cols).ravel(), np.einsum("ori,or->oi", Jp, r).ravel(),
-                     minlength=p.G * J3).reshape(p.G, J3)
-
-    # --- shape: r_k = w_k (R_v (X_k - (X_lh + X_rh)/2) - L_k); d r_k / d X_m = w_k R_v D[k, m] with
-    # D = I - 1 c^T (c = 1/2 at both hips). R_v^T R_v = I makes the point block (D^T W^2 D) kron I_3.
-    # with the group's scale q: r_k = w_k (q R_v rel_k - L_k); every derivative gains a factor q
-    sv, S = p.s_view, len(p.s_view)
-    qs = np.exp(log_q)[p.s_group]  # (S,)
-    ws = p.shape_w * np.sqrt(w_shape)  # (S, 23)
-    Rs = R[sv]
-    rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
-    Rrel = rel @ Rs.transpose(0, 2, 1)
-    rs = r_shape * np.sqrt(w_shape)[..., None]
-    c = np.zeros(NUM_JOINTS)
-    c[[_LHIP, _RHIP]] = 0.5
-    # camera (rotation) part: d(q R rel)/d omega = -q [R rel]x
-    Jsc = -_skew(Rrel) * (ws * qs[:, None])[..., None, None]  # (S, 23, 3, 3)
-    Hcc_rot = np.zeros((p.V, 3, 3))
-    _scatter_blocks(Hcc_rot, sv, np.einsum("skri,skrj->sij", Jsc, Jsc))
-    Hcc[:, nf : nf + 3, nf : nf + 3] += Hcc_rot
-    gc_rot = np.zeros((p.V, 3))
-    _scatter_blocks(gc_rot, sv, np.einsum("skri,skr->si", Jsc, rs))
-    gc[:, nf : nf + 3] += gc_rot
-    w2 = (ws * qs[:, None]) ** 2
-    sw2 = w2.sum(1)
-    M = (np.eye(NUM_JOINTS)[None] * w2[:, :, None] - c[None, :, None] * w2[:, None, :] - w2[:, :, None] * c[None, None, :]
-         + sw2[:, None, None] * np.outer(c, c)[None])  # (S, 23, 23) = D^T W^2 D
-    M_group = np.zeros((p.G, NUM_JOINTS, NUM_JOINTS))
-    _scatter_blocks(M_group, p.s_group, M)
-    Hpp += (M_group[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]).reshape(p.G, J3, J3)
-    y = (ws * qs[:, None])[..., None] * (rs @ Rs)  # w_k q R^T r_k
-    _scatter_blocks(gp, p.s_group, (y - c[None, :, None] * y.sum(1, keepdims=True)).reshape(S, J3))
-    Z = (ws * qs[:, None])[..., None, None] * np.einsum("skri,sra->skia", Jsc, Rs)  # Jsc_k^T w_k q R
-    cross = Z - c[None, :, None, None] * Z.sum(1, keepdims=True)  # (S, 23(m), 3(i), 3(a))
-    Hcp_rot = np.zeros((p.G, p.V, 3, J3))
-    _scatter_blocks(Hcp_rot.reshape(p.G * p.V, 3, J3), p.s_group * p.V + sv, cross.transpose(0, 2, 1, 3).reshape(S, 3, J3))
-    Hcp[:, :, nf : nf + 3, :] += Hcp_rot
-
-    # --- group scales (log q): d r_k / d log q = w_k q R rel_k; its cross term with the rotation vanishes
-    # ((-q w [a]x)^T (q w a) = 0) and with the points it is q^2 (w_m^2 rel_m - c_m sum_k w_k^2 rel_k)
-    jq = (ws * qs[:, None])[..., None] * Rrel  # (S, 23, 3)
-    hqq = np.bincount(p.s_group, (jq**2).sum((1, 2)), minlength=p.G) + p.scale_w**2
-    gq = np.bincount(p.s_group, (jq * rs).sum((1, 2)), minlength=p.G) + p.scale_w * r_scale
-    wrel = w2[..., None] * rel  # (S, 23, 3), w2 includes q^2
-    xq = np.zeros((p.G, J3))
-    _scatter_blocks(xq, p.s_group, (wrel - c[None, :, None] * wrel.sum(1, keepdims=True)).reshape(S, J3))
-    if not p.free_scale:
-        hqq, gq, xq = np.ones(p.G), np.zeros(p.G), np.zeros((p.G, J3))
-    Hpp_ext = np.zeros((p.G, J3 + 1, J3 + 1))
-    Hpp_ext[:, :J3, :J3] = Hpp
-    Hpp_ext[:, J3, :J3] = Hpp_ext[:, :J3, J3] = xq
-    Hpp_ext[:, J3, J3] = hqq
-    Hpp = Hpp_ext
-    gp = np.concatenate([gp, gq[:, None]], axis=1)
-    Hcp = np.concatenate([Hcp, np.zeros((p.G, p.V, nc, 1))], axis=3)
-
-    # --- focal priors
-    for vv in range(p.V):
-        if p.prior_w[vv] > 0:
-            jf = p.prior_w[vv] / nf * dlogf[vv]
-            Hcc[vv, :nf, :nf] += np.outer(jf, jf)
-            gc[vv, :nf] += jf * r_prior[vv]
-    # fixed camera parameters
-    Hcc[~free_cam] = 0.0
-    Hcc = Hcc.copy()
-    for vv in range(p.V):
-        fixed = ~free_cam[vv]
-        Hcc[vv][:, fixed] = 0.0
-        Hcc[vv][fixed, fixed] = 1.0
-    gc[~free_cam] = 0.0
-    Hcp[:, ~free_cam] = 0.0
-    return Hcc, Hcp, Hpp, gc, gp, _robust_cost(r_obs, r_shape, r_prior, r_scale, p.huber), w_obs
-
-
-def _solve(Hcc, Hcp, Hpp, gc, gp, lam):
-    V, nc = gc.shape
-    G, J3 = gp.shape
-    n = V * nc
-    Hpp_d = Hpp + lam * (np.diagonal(Hpp, axis1=1, axis2=2)[..., None] * np.eye(J3) + 1e-9 * np.eye(J3))
-    Hpp_inv = np.linalg.inv(Hpp_d)
-    B = Hcp.reshape(G, n, J3)
-    S = np.zeros((n, n))
-    for v in range(V):
-        S[v * nc : (v + 1) * nc, v * nc : (v + 1) * nc] = Hcc[v]
-    S += lam * np.diag(np.maximum(np.diag(S), 1e-12))
-    BHi = B @ Hpp_inv  # (G, n, J3)
-    S -= BHi.transpose(1, 0, 2).reshape(n, G * J3) @ B.transpose(1, 0, 2).reshape(n, G * J3).T
-    rhs = -gc.reshape(n) + np.einsum("gnj,gj->n", BHi, gp)
-    dc = np.linalg.solve(S + 1e-12 * np.eye(n), rhs)
-    dp = -np.einsum("gij,gj->gi", Hpp_inv, gp + np.einsum("gnj,n->gj", B, dc))
-    return dc.reshape(V, nc), dp[:, :-1].reshape(G, NUM_JOINTS, 3), dp[:, -1], S
 
 
 def bundle_adjust(
