@@ -134,7 +134,7 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
 
 @sequence_asset(
     "cameras",
-    code_version="4",
+    code_version="5",
     check_specs=[
         dg.AssetCheckSpec("cameras_valid", asset="extrinsics", blocking=True,
                           description="finite positive focal, principal point inside, right-handed rotations"),
@@ -144,6 +144,9 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
                           description="cameras above the floor, each with most people in front and in its image"),
         dg.AssetCheckSpec("focal_constrained", asset="extrinsics",
                           description="every focal determined to 5 % (relative std of the bundle adjustment; warns)"),
+        dg.AssetCheckSpec("floor_found", asset="extrinsics",
+                          description="the people gave an up direction and a floor (else the cameras are in camera "
+                                      "0's frame; warns)"),
     ],
 )
 def extrinsics(
@@ -165,7 +168,8 @@ def extrinsics(
     table = cameras_to_table(result.cameras, context.partition_key)
     seconds = time.perf_counter() - start
     floor = result.diagnostics.floor
-    people = floor.floor_points_m if floor is not None else np.zeros((0, 3))
+    # the rig picture and the rig check need people on the floor; without a floor, their own positions
+    people = floor.floor_points_m if floor is not None else result.diagnostics.people_world_m
     with tempfile.TemporaryDirectory() as tmp:
         png = plot_rigs(result.cameras, None, people, Path(tmp) / "rig.png",
                         title=f"{context.partition_key}: estimated cameras and people on the floor")
@@ -176,12 +180,32 @@ def extrinsics(
         table, "cameras", rows=len(table), seconds=round(seconds, 2), rig=picture,
         per_view=dg.MetadataValue.md(per_view.to_markdown(index=False, floatfmt=".3g")),
         bundle_inlier_fraction=float(result.diagnostics.bundle_inlier_fraction),
+        world_frame=result.diagnostics.world_frame,
+        up_source=floor.up_source if floor is not None else "none",
+        up_std_deg=float(floor.up_std_deg) if floor is not None else float("nan"),
     )
+    rig = check_rig_geometry(table, people, floor_known=floor is not None)
     for name, report in (("cameras_valid", check_cameras_valid(table)), ("focal_plausible", check_focal_plausible(table)),
-                         ("rig_geometry", check_rig_geometry(table, people))):
+                         ("rig_geometry", rig)):
         yield check_result(context, name, report)
     yield check_result(context, "focal_constrained", _focal_constrained_report(per_view),
                        severity=dg.AssetCheckSeverity.WARN)
+    yield check_result(context, "floor_found", _floor_report(result.diagnostics, config.align_floor),
+                       severity=dg.AssetCheckSeverity.WARN)
+
+
+def _floor_report(diagnostics, asked: bool) -> CheckReport:
+    if not asked:
+        return CheckReport.nothing_to_check("the floor alignment is switched off (align_floor: false)")
+    floor = diagnostics.floor
+    if floor is None:
+        return CheckReport(False, f"no floor: {diagnostics.floor_problem}; the cameras are in camera 0's frame "
+                                  "(camera 0 at the origin, OpenCV axes)", {}, checked=1)
+    return CheckReport(True, f"up from {floor.up_source} (+- {floor.up_std_deg:.2f} deg), floor from "
+                             f"{floor.contact_groups} people ({floor.standing_groups} standing), contact rms "
+                             f"{100 * floor.floor_rms_m:.1f} cm",
+                       {"up_std_deg": float(floor.up_std_deg), "floor_rms_m": float(floor.floor_rms_m),
+                        "standing_groups": float(floor.standing_groups)}, checked=1)
 
 
 def _focal_constrained_report(per_view: pd.DataFrame) -> CheckReport:

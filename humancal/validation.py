@@ -154,24 +154,28 @@ def check_focal_plausible(cameras: pd.DataFrame, hfov_deg: tuple[float, float] =
     return CheckReport(True, f"{known} focal lengths give plausible fields of view{note}", figures, checked=known)
 
 
-def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in_view: float = 0.5) -> CheckReport:
+def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in_view: float = 0.5, *,
+                       floor_known: bool = True) -> CheckReport:
     """The calibrated rig makes physical sense in its world frame (Z up, floor z = 0, metres).
 
-    * above the floor: every camera centre has z > 0;
-    * looking at the people: at least ``min_in_view`` of the people's positions (``people_floor_m`` (N, 3)
-      floor points, raised to 1 m, the middle of a body) are in front of every camera and project inside its
-      image.
+    * above the floor: every camera centre has z > 0 (only when ``floor_known``);
+    * looking at the people: at least ``min_in_view`` of the people's positions are in front of every camera
+      and project inside its image. With ``floor_known`` they are floor points (N, 3) raised to 1 m, the middle
+      of a body; without (cameras in camera 0's frame, no floor found) they are the people's own positions
+      (e.g. hip midpoints) and are used as given.
 
     The right-handedness of the camera frames is :func:`check_cameras_valid`'s. No camera at all: not checked.
     """
     if cameras.empty:
         return CheckReport.nothing_to_check("no cameras in the table", {})
-    points = np.asarray(people_floor_m, dtype=np.float64).reshape(-1, 3) + np.array([0.0, 0.0, 1.0])
+    points = np.asarray(people_floor_m, dtype=np.float64).reshape(-1, 3)
+    if floor_known:
+        points = points + np.array([0.0, 0.0, 1.0])
     bad, heights, seen = [], [], []
     for v, cam in enumerate(cameras_from_table(cameras)):
         height = float(cam.center_world_m[2])
         heights.append(height)
-        if not height > 0:
+        if floor_known and not height > 0:
             bad.append(f"view {v}: camera centre {height:.2f} m is not above the floor")
         if len(points):
             cam_pts = points @ cam.R_cam_from_world.T + cam.t_cam_from_world_m
@@ -183,12 +187,13 @@ def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in
             if inside.mean() < min_in_view:
                 bad.append(f"view {v}: only {100 * inside.mean():.0f} % of the people are in front of the camera "
                            f"and inside its image (need {100 * min_in_view:.0f} %)")
-    figures = {"min_camera_height_m": min(heights) if heights else float("nan")}
+    figures = {"min_camera_height_m": min(heights) if heights and floor_known else float("nan")}
     if seen:
         figures["min_people_in_view_fraction"] = min(seen)
     if not len(points):
         bad.append("no people positions to check the cameras' viewing directions against")
     if bad:
         return CheckReport(False, "; ".join(bad), figures, checked=len(heights))
-    return CheckReport(True, f"{len(heights)} cameras above the floor, each seeing most of the people", figures,
+    where = "above the floor" if floor_known else "(no floor found: heights not checked)"
+    return CheckReport(True, f"{len(heights)} cameras {where}, each seeing most of the people", figures,
                        checked=len(heights))

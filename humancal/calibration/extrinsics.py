@@ -16,7 +16,9 @@ Steps (each in its own module):
    lengths that single views cannot observe (level or straight-down cameras) and removes the bias of the linear
    solve; views the linear solve cannot see start from a resection or the other views' field of view
    (:mod:`.blind_views`);
-5. the final world frame: Z up, floor at z = 0 from the standing people (:mod:`.floor`).
+5. the final world frame: Z up, floor at z = 0 from the people's feet and trunks, standing or not
+   (:mod:`.floor`); when the people give no floor the cameras stay in camera 0's frame, labelled so
+   (``ExtrinsicsDiagnostics.world_frame``).
 """
 
 from __future__ import annotations
@@ -31,13 +33,13 @@ import numpy as np
 import pandas as pd
 
 from humancal.calibration.blind_views import blind_views, other_views_focal, resection_pass, translations_from_others
-from humancal.calibration.floor import FloorAlignment, align_to_floor
+from humancal.calibration.floor import FloorAlignment, NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.matching import groups_from_pairs
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
 from humancal.calibration.translations import root_positions, solve_focals_translations
-from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted
+from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted, hip_midpoints
 from humancal.calibration.view_graph import check_view_graph
 from humancal.camera import Camera
 from humancal.detections import DenseDetections
@@ -134,7 +136,11 @@ class ExtrinsicsDiagnostics:
         pairs: one row per view pair: ``view_a``, ``view_b``, ``support``, ``residual_deg`` (disagreement of the
             pair rotation with the averaged rotations; NaN when unused).
         groups: the matched detections used: ``frame``, ``view``, ``det_id``, ``group``.
-        floor: the :class:`FloorAlignment` (None when ``align_floor`` is off).
+        floor: the :class:`FloorAlignment` (None when ``align_floor`` is off or no floor was found).
+        world_frame: ``"floor"`` (Z up, floor at z = 0, origin on the floor amid the people) or ``"camera_0"``
+            (camera 0 at the origin looking along +z, OpenCV axes: ``align_floor`` off, or no floor found).
+        floor_problem: why no floor was found (None when one was, or when not asked for).
+        people_world_m: (G, 3) the matched groups' hip midpoints in the returned world frame, metres.
         bundle_inlier_fraction: keypoints within the Huber threshold in the bundle adjustment.
         timings_s: seconds per step.
     """
@@ -145,6 +151,9 @@ class ExtrinsicsDiagnostics:
     floor: FloorAlignment | None
     bundle_inlier_fraction: float
     timings_s: dict[str, float] = field(default_factory=dict)
+    world_frame: str = "floor"
+    floor_problem: str | None = None
+    people_world_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 @dataclass(frozen=True)
@@ -292,14 +301,14 @@ def estimate_extrinsics(
         view_names: the views' names in view order (e.g. camera folders), used in the error messages.
 
     Returns:
-        :class:`ExtrinsicsEstimate`: cameras in the world frame (Z up, floor z = 0 unless ``align_floor`` is off;
-        camera 0's frame otherwise), metres.
+        :class:`ExtrinsicsEstimate`: cameras in the world frame (Z up, floor z = 0 unless ``align_floor`` is off
+        or the people give no floor; camera 0's frame otherwise, see ``diagnostics.world_frame``), metres.
 
     Raises:
         CalibrationError: fewer than two views, a view without detections, views sharing no matched people
             with the others (all views outside the largest connected part of the view graph are named), a
-            numerical failure (naming the stage and, where known, the views), or too few matched standing people
-            for the floor.
+            numerical failure (naming the stage and, where known, the views). Finding no floor is not an error
+            (``diagnostics.world_frame``).
         ValueError: inconsistent inputs.
     """
     config = config or ExtrinsicsConfig()
@@ -380,14 +389,22 @@ def estimate_extrinsics(
 
     clock = time.perf_counter()
     R_final, t_final = ba.R_cam_from_world, ba.t_cam_from_world_m
-    floor = None
+    floor, floor_problem = None, None
     if config.align_floor:
         # standing from the reconstructed (triangulated) keypoints: body-internal, camera-free
         standing = standing_score(ba.points_world_m)
         with _stage("floor alignment"):
-            floor = align_to_floor(ba.points_world_m, standing, R_final[0],
-                                   upright_threshold=config.upright_threshold)
+            try:
+                floor = align_to_floor(ba.points_world_m, standing, R_final[0],
+                                       upright_threshold=config.upright_threshold)
+            except NoFloorError as error:  # the cameras hold: keep camera 0's frame and say so
+                floor_problem = str(error)
+                logger.warning("no floor found (%s): the cameras are returned in camera 0's frame", error)
+        if floor is not None:
             R_final, t_final = floor.apply_to_camera(R_final, t_final)
+    people = hip_midpoints(ba.points_world_m)
+    if floor is not None:
+        people = (people - floor.origin_old_m) @ floor.Q_new_from_old.T
         _require_finite(np.c_[R_final.reshape(V, -1), t_final], "floor alignment")
     timings["floor"] = time.perf_counter() - clock
 
@@ -428,7 +445,9 @@ def estimate_extrinsics(
         "frame": detections.frame[rows], "view": detections.view[rows], "det_id": detections.det_id[rows],
         "group": np.repeat(np.arange(len(groups)), [len(g) for g in groups]),
     })
-    diagnostics = ExtrinsicsDiagnostics(per_view, pair_table, group_table, floor, ba.inlier_fraction, timings)
+    diagnostics = ExtrinsicsDiagnostics(per_view, pair_table, group_table, floor, ba.inlier_fraction, timings,
+                                        world_frame="floor" if floor is not None else "camera_0",
+                                        floor_problem=floor_problem, people_world_m=people)
     logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})

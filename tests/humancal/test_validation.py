@@ -53,6 +53,19 @@ def test_a_camera_below_the_floor_or_looking_away_fails():
     assert not check_rig_geometry(cameras_to_table(_ring(), "s"), np.zeros((0, 3))).passed
 
 
+def test_without_a_floor_only_the_viewing_directions_are_checked():
+    """Cameras in camera 0's frame (no floor found): heights mean nothing, people in front still do."""
+    cams = _ring()
+    cams[1] = _look_at(np.array([0.0, 5.0, -0.5]), [0, 0, 1.0])  # "below the floor" is no fault without a floor
+    people = PEOPLE + [0.0, 0.0, 1.0]  # the people's own positions, used as given
+    report = check_rig_geometry(cameras_to_table(cams, "s"), people, floor_known=False)
+    assert report.passed and "no floor found" in report.description, report.description
+    cams[2] = _look_at(np.array([-5.0, 0.0, 2.5]), [-10.0, 0.0, 1.0])
+    report = check_rig_geometry(cameras_to_table(cams, "s"), people, floor_known=False)
+    assert not report.passed and "view 2: only 0 % of the people" in report.description
+    assert "above the floor" not in report.description
+
+
 def test_a_mirrored_camera_is_not_right_handed():
     table = cameras_to_table(_ring(), "s")
     R = np.asarray(table.loc[0, "R_cam_from_world"]).reshape(3, 3).copy()

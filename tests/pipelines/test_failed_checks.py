@@ -45,8 +45,10 @@ def _calibration(partition: str):
         cameras[1] = _look_at(np.array([0.0, 5.0, -0.5]), [0, 0, -1.0])
     per_view = pd.DataFrame({"view": range(4), "focal_px": 1000.0, "focal_rel_std": [0.01, 0.2, 0.01, 0.01],
                              "focal_status": ["ok", "loose", "ok", "ok"]})
-    diagnostics = SimpleNamespace(floor=SimpleNamespace(floor_points_m=PEOPLE), per_view=per_view,
-                                  bundle_inlier_fraction=1.0)
+    floor = SimpleNamespace(floor_points_m=PEOPLE, up_source="floor_plane", up_std_deg=0.1, contact_groups=3,
+                            standing_groups=3, floor_rms_m=0.01)
+    diagnostics = SimpleNamespace(floor=floor, per_view=per_view, bundle_inlier_fraction=1.0, world_frame="floor",
+                                  floor_problem=None, people_world_m=PEOPLE + [0.0, 0.0, 1.0])
     return SimpleNamespace(cameras=cameras, diagnostics=diagnostics)
 
 
@@ -114,7 +116,8 @@ def test_the_recorded_outcomes_are_those_of_the_latest_materialization(defs, ins
     update(defs, instance)
     below = {o.check: o for o in latest_check_outcomes(instance, dg.AssetKey("extrinsics"), BELOW)}
     loose = {o.check: o for o in latest_check_outcomes(instance, dg.AssetKey("extrinsics"), LOOSE)}
-    assert set(below) == set(loose) == {"cameras_valid", "focal_plausible", "rig_geometry", "focal_constrained"}
+    assert set(below) == set(loose) == {"cameras_valid", "focal_plausible", "rig_geometry", "focal_constrained",
+                                        "floor_found"}
     assert not below["rig_geometry"].passed and loose["rig_geometry"].passed
     assert below["rig_geometry"].blocking and not below["focal_constrained"].blocking
     assert latest_check_outcomes(instance, dg.AssetKey("metric_tables"), BELOW) is None

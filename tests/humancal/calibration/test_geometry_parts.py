@@ -6,6 +6,8 @@ from scipy.spatial.transform import Rotation
 
 from evaluation.oracle import lift_ground_truth, upright_scores
 from humancal.calibration import CalibrationError, align_rig, align_to_floor, plot_rigs
+from humancal.calibration.floor import NoFloorError
+from humancal.synthetic.activities import ACTIVITIES
 from humancal.calibration.multiview_focal import bundle_adjust
 from humancal.geometry.alignment import fit_similarity
 from humancal.geometry.rotations import rotvec_to_rotmat
@@ -85,8 +87,55 @@ def test_floor_alignment_of_a_tilted_world(ring_scene):
     soles = new[upright >= 0.5][:, 17:].min(1)[:, 2]
     assert abs(np.median(soles)) < 0.01
     assert np.isclose(np.linalg.det(floor.Q_new_from_old), 1.0)
-    with pytest.raises(CalibrationError, match="standing people"):
-        align_to_floor(old[:3], upright[:3], R_cam0.T)
+    with pytest.raises(NoFloorError, match="only 2 people"):
+        align_to_floor(old[:2], upright[:2], R_cam0.T)
+
+
+def _crouching(scene):
+    """Every third crouching pose of a scene, (G, 23, 3) world metres."""
+    crouch = scene.activity == ACTIVITIES.index("crouch")
+    return scene.keypoints_world_m[crouch][::3]
+
+
+@pytest.fixture(scope="module")
+def crouch_scene(body_model):
+    from humancal.synthetic import generate_scene, preset
+
+    return generate_scene(preset("demo", num_people=4, num_views=2, num_frames=300, seed=5), body_model,
+                          sequence="crouch")
+
+
+def test_floor_from_people_who_do_not_stand(crouch_scene):
+    """No standing person: the foot contacts of crouching people give the floor, the torso axes a coarse up."""
+    X = _crouching(crouch_scene)
+    score = standing_score(X)
+    assert len(X) >= 30 and np.all(score < 0.5)  # nobody stands: the standing path cannot be taken
+    Q = Rotation.from_euler("xyz", [25, -10, 70], degrees=True).as_matrix()
+    old = X @ Q.T + np.array([1.0, -2.0, 3.0])
+    R_cam0 = (Q @ crouch_scene.rig[0].R_cam_from_world.T).T
+    floor = align_to_floor(old, score, R_cam0)
+    up = floor.Q_new_from_old @ (Q @ [0, 0, 1.0])
+    assert floor.up_source == "contact_plane" and floor.standing_groups == 0
+    assert np.degrees(np.arccos(up[2])) < 0.3
+    new = (old - floor.origin_old_m) @ floor.Q_new_from_old.T
+    assert abs(np.median(new[:, 17:, 2].min(1))) < 0.01  # the soles on z = 0
+    assert np.isfinite(floor.up_std_deg) and floor.contact_groups >= 0.9 * len(X)
+
+    # all contacts on one spot (one crouch of one person, ankles anchored): no plane; the torso axes give a
+    # coarse up
+    person, frame = np.argwhere(crouch_scene.activity == ACTIVITIES.index("crouch"))[0]
+    run = crouch_scene.activity[person, frame:] == ACTIVITIES.index("crouch")
+    length = int(np.argmin(run)) if not run.all() else len(run)
+    one = crouch_scene.keypoints_world_m[person, frame:frame + length] @ Q.T + np.array([1.0, -2.0, 3.0])
+    assert len(one) >= 30
+    coarse = align_to_floor(one, standing_score(one), R_cam0)
+    assert coarse.up_source == "torso_axes"
+    assert np.degrees(np.arccos((coarse.Q_new_from_old @ (Q @ [0, 0, 1.0]))[2])) < 45.0
+
+    # people tumbling every way give no up direction: a labelled refusal, not a wrong floor
+    tumbled = np.einsum("gij,gkj->gki", Rotation.random(len(old), random_state=3).as_matrix(), old)
+    with pytest.raises(NoFloorError, match="torso axes point every way"):
+        align_to_floor(tumbled, standing_score(tumbled), R_cam0)
 
 
 def test_similarity_and_rig_alignment(ring_scene):
