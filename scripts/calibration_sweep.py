@@ -204,7 +204,7 @@ def run_synthetic(n: int, seed0: int, config: IntrinsicsConfig, out: Path | None
                   f"{df.position_error_mm.max():.0f} mm; {times['intrinsics_s']:.1f} + {times['extrinsics_s']:.1f} s",
                   flush=True)
         if out is not None and i == 0 and len(variants) == 1:
-            plot_rigs(extr.cameras, list(scene.rig), extr.diagnostics.floor.floor_points_m,
+            plot_rigs(extr.cameras, list(scene.rig), _people_on_floor(extr.diagnostics),
                       out / "sweep_scene0_rigs.png", title="synthetic scene 0")
     return pd.DataFrame(rows)
 
@@ -249,10 +249,15 @@ def run_shelf(config: IntrinsicsConfig, out: Path | None, lifter=None,
     rows = view_rows("shelf", intr, extr, list(shelf.cameras), shelf.detections, assoc, {**times, **extra})
     if out is not None:
         what = "stand-in" if lifter is None else "learned-lifter"
-        plot_rigs(extr.cameras, list(shelf.cameras), extr.diagnostics.floor.floor_points_m, out / "shelf_rigs.png",
+        plot_rigs(extr.cameras, list(shelf.cameras), _people_on_floor(extr.diagnostics), out / "shelf_rigs.png",
                   title=f"Shelf ({what} lifted poses)")
     print(extr.diagnostics.per_view.to_string())
     return pd.DataFrame(rows)
+
+
+def _people_on_floor(diagnostics) -> np.ndarray:
+    """The people's floor positions, or their own positions when no floor was found."""
+    return diagnostics.floor.floor_points_m if diagnostics.floor is not None else diagnostics.people_world_m
 
 
 def extrinsics_variants(spec: str) -> dict[str, ExtrinsicsConfig]:
