@@ -80,6 +80,12 @@ class ExtrinsicsConfig:
         seed: randomness of the subsampling.
         fov_range_deg: plausible horizontal field of view (narrowest, widest), degrees: bounds every focal in the
             bundle adjustment (by its parameterization) and the focal a resection may start a view from.
+        blind_start_fov_deg: views that neither a single view, the linear solve nor a resection could estimate
+            start the bundle adjustment from the other views' field of view *and* from each of these diagonal
+            fields of view (degrees; the diagonal makes them the same for portrait and landscape images), with
+            translations solved again at those focal lengths; each start gets ``blind_start_iterations``
+            iterations and the lowest cost goes on. Empty: the other views' field of view only.
+        blind_start_iterations: bundle-adjustment iterations given to each start of the blind views.
     """
 
     rotation_threshold_deg: float = 10.0
@@ -101,6 +107,8 @@ class ExtrinsicsConfig:
     upright_threshold: float = 0.5
     seed: int = 0
     fov_range_deg: tuple[float, float] = (10.0, 140.0)
+    blind_start_fov_deg: tuple[float, ...] = (50.0, 65.0, 80.0, 95.0, 115.0)
+    blind_start_iterations: int = 12
 
     def __post_init__(self) -> None:
         if not 0.0 < self.rotation_threshold_deg < 90.0:
@@ -261,6 +269,34 @@ def _require_finite(values: np.ndarray, stage: str) -> None:
         raise CalibrationError(f"extrinsics, {stage}: views {bad.tolist()} have non-finite parameters")
 
 
+def _best_start(adjust, f, t, points, unseen, diag, bounds, detections, lifted, groups, rows_a, rows_b, R, pp,
+                config):
+    """The start of the bundle adjustment with the lowest cost after a few iterations: the one in hand, or the
+    views in ``unseen`` at each of ``config.blind_start_fov_deg`` (diagonal fields of view), with the
+    translations and keypoints solved again at those focal lengths (all focal lengths held by a tight prior).
+
+    Returns the chosen focal lengths, translations, keypoints and a description of the start.
+    """
+    best = (adjust(f, t, points, config.blind_start_iterations).cost, f, t, points, "the other views' field of view")
+    tight = np.full(len(f), 1e-3)
+    for fov in config.blind_start_fov_deg:
+        f_s = np.where(unseen, np.clip(0.5 * diag / np.tan(np.radians(fov) / 2), bounds[:, 0], bounds[:, 1]), f)
+        roots_s = root_positions(detections, lifted, _K(f_s, f_s, pp))
+        sol_s = solve_focals_translations(roots_s, detections.view, rows_a, rows_b, R, f_s, tight,
+                                          person_scale_std=config.person_scale_std)
+        if not np.isfinite(sol_s.t_cam_from_world_m).all():
+            continue
+        t_s = sol_s.t_cam_from_world_m
+        points_s = _initial_points(groups, lifted, np.nan_to_num(roots_s.T_cam_m), detections.view, R, t_s)
+        try:
+            cost = adjust(f_s, t_s, points_s, config.blind_start_iterations).cost
+        except CalibrationError:  # a start the bundle adjustment refuses (non-finite keypoints) is no candidate
+            continue
+        if cost < best[0]:
+            best = (cost, f_s, t_s, points_s, f"a {fov:.0f} degree diagonal field of view")
+    return best[1], best[2], best[3], best[4]
+
+
 def _pick_groups(groups, detections, max_groups, rng):
     if len(groups) <= max_groups:
         return groups
@@ -376,13 +412,21 @@ def estimate_extrinsics(
     logger.info("linear focal std (data only) %s", np.round(sol.focal_rel_std_data, 3).tolist())
     _require_finite(t_init, "translations before the bundle adjustment")
     points = _initial_points(groups, lifted, np.nan_to_num(roots.T_cam_m), detections.view, R, t_init)
+    adjust = lambda f_start, t_start, points_start, iterations: bundle_adjust(  # noqa: E731
+        detections, lifted, groups, points_start, f_start, f_start, pp, R, t_start,
+        square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
+        shape_std_m=config.shape_std_m, group_scale_std=config.person_scale_std, focal_bounds_px=bounds,
+        max_iterations=iterations,
+    )
     with _stage("bundle adjustment"):
-        ba = bundle_adjust(
-            detections, lifted, groups, points, f, f, pp, R, t_init,
-            square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
-            shape_std_m=config.shape_std_m, group_scale_std=config.person_scale_std, focal_bounds_px=bounds,
-            max_iterations=config.bundle_iterations,
-        )
+        unseen = blind & ~resected
+        if unseen.any() and config.blind_start_fov_deg:
+            f, t_init, points, started = _best_start(adjust, f, t_init, points, unseen, diag, bounds, detections,
+                                                     lifted, groups, rows_a[sol.inlier], rows_b[sol.inlier], R,
+                                                     pp, config)
+            logger.info("views %s: started the bundle adjustment from %s px (%s)", np.flatnonzero(unseen).tolist(),
+                        np.round(f[unseen]).tolist(), started)
+        ba = adjust(f, t_init, points, config.bundle_iterations)
     _require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
                     "bundle adjustment")
     timings["bundle"] = time.perf_counter() - clock

@@ -81,6 +81,7 @@ class BundleResult:
             its plausible range), ``"behind_camera"`` (most of its keypoints behind it) or ``"no_inliers"`` (no
             keypoint within the Huber threshold).
         rejected_steps: steps refused (cost increase, non-finite values or a singular system).
+        cost: the final robust cost (comparable between runs on the same groups and priors).
     """
 
     fx_px: np.ndarray
@@ -96,6 +97,7 @@ class BundleResult:
     group_scale: np.ndarray | None = None
     view_status: np.ndarray | None = None
     rejected_steps: int = 0
+    cost: float = float("nan")
 
 
 def focal_bounds_from_fov(width_px: np.ndarray, fov_range_deg: tuple[float, float] = (10.0, 140.0)) -> np.ndarray:
@@ -289,7 +291,7 @@ def bundle_adjust(
         logger.warning("bundle adjustment: views %s end %s", np.flatnonzero(status != "ok").tolist(),
                        status[status != "ok"].tolist())
     return BundleResult(fx, fy, R, t, X, f_std, rms, float(inl.mean()) if len(inl) else 0.0, it, converged,
-                        np.exp(log_q), status, rejected)
+                        np.exp(log_q), status, rejected, float(cost))
 
 
 def _damped_step(prob, Hcc, Hcp, Hpp, gc, gp, lam, cams, R0, X, log_q, huber):
