@@ -11,7 +11,7 @@ Example:
 """
 
 from humancal.synthetic.activities import ACTIVITIES, GESTURES
-from humancal.synthetic.config import RIG_KINDS, DetectorNoise, SceneConfig
+from humancal.synthetic.config import BEHAVIOURS, RIG_KINDS, DetectorNoise, SceneConfig
 from humancal.synthetic.motions import Motions, generate_motions
 from humancal.synthetic.noise import JOINT_NOISE_WEIGHTS, DetectorOutput, simulate_detections
 from humancal.synthetic.people import People, sample_people
@@ -23,6 +23,7 @@ __all__ = [
     "ACTIVITIES",
     "GESTURES",
     "RIG_KINDS",
+    "BEHAVIOURS",
     "DetectorNoise",
     "SceneConfig",
     "Motions",

@@ -1,4 +1,5 @@
-"""Random activity schedules (walk, turn, stand, gesture, crouch) and their smooth per-frame envelopes."""
+"""Random activity schedules (walk, turn, stand, gesture, crouch, sit, bend) and their smooth per-frame
+envelopes, for each scene behaviour (``SceneConfig.behaviour``)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import numpy as np
 
 __all__ = [
     "ACTIVITIES",
+    "ACTIVITY_PROBABILITIES",
     "GESTURES",
     "Segment",
     "ActivityTrack",
@@ -16,11 +18,22 @@ __all__ = [
     "smooth",
 ]
 
-ACTIVITIES: tuple[str, ...] = ("walk", "turn", "stand", "gesture", "crouch")
-"""Activity kinds; the index is the code stored per frame."""
+ACTIVITIES: tuple[str, ...] = ("walk", "turn", "stand", "gesture", "crouch", "sit", "bend")
+"""Activity kinds; the index is the code stored per frame (new kinds are appended, so codes keep their
+meaning)."""
 GESTURES: tuple[str, ...] = ("wave_left", "wave_right", "raise_both", "point_left", "point_right")
 
 _PROBABILITIES = {"walk": 0.4, "turn": 0.12, "stand": 0.16, "gesture": 0.17, "crouch": 0.15}
+_LOW_PROBABILITIES = {"sit": 0.3, "crouch": 0.25, "bend": 0.2, "walk": 0.15, "stand": 0.1}
+ACTIVITY_PROBABILITIES: dict[str, dict[str, float]] = {
+    "mixed": _PROBABILITIES,
+    "seated": {"sit": 1.0},
+    "low": _LOW_PROBABILITIES,
+}
+"""Probability of each activity when a new one is drawn, per scene behaviour (the one just done is left out
+and the rest renormalised). ``"seated"`` is one sit over the whole capture."""
+_WALK_DURATION_S = {"mixed": (3.0, 8.0), "low": (1.5, 4.0)}
+"""Walks are short between the low activities."""
 _TRANSITION_S = 0.6
 """Width of the smoothing window between activities, seconds."""
 
@@ -37,7 +50,8 @@ class Segment:
         curvature_per_m: mean path curvature, 1/m, positive turning left (walk only).
         turn_rate_rad_s: yaw rate, rad/s, positive turning left (turn only).
         gesture: index into :data:`GESTURES` (gesture only; -1 otherwise).
-        depth: crouch depth in [0, 1] (crouch only).
+        depth: crouch depth in [0, 1] (crouch), or bend depth in [0.6, 1] (bend: the trunk bends forward
+            ``100 * depth`` degrees at the hips); 0 otherwise.
     """
 
     kind: str
@@ -50,9 +64,11 @@ class Segment:
     depth: float = 0.0
 
 
-def _draw_segment(kind: str, start: int, fps: float, rng: np.random.Generator) -> Segment:
+def _draw_segment(
+    kind: str, start: int, fps: float, rng: np.random.Generator, walk_duration_s: tuple[float, float] = (3.0, 8.0)
+) -> Segment:
     if kind == "walk":
-        duration = rng.uniform(3.0, 8.0)
+        duration = rng.uniform(*walk_duration_s)
         return Segment(
             kind,
             start,
@@ -74,28 +90,44 @@ def _draw_segment(kind: str, start: int, fps: float, rng: np.random.Generator) -
         )
     if kind == "crouch":
         return Segment(kind, start, start + round(rng.uniform(2.5, 5.0) * fps), depth=float(rng.uniform(0.5, 1.0)))
+    if kind == "sit":
+        return Segment(kind, start, start + round(rng.uniform(4.0, 10.0) * fps))
+    if kind == "bend":
+        return Segment(kind, start, start + round(rng.uniform(2.0, 4.0) * fps), depth=float(rng.uniform(0.6, 1.0)))
     raise ValueError(f"unknown activity {kind!r}; known: {list(ACTIVITIES)}")
 
 
-def plan_activities(num_frames: int, fps: float, rng: np.random.Generator) -> list[Segment]:
+def plan_activities(
+    num_frames: int, fps: float, rng: np.random.Generator, behaviour: str = "mixed"
+) -> list[Segment]:
     """A random sequence of activities covering ``num_frames`` frames (no activity twice in a row).
 
     Args:
         num_frames: F >= 1.
         fps: frames per second.
         rng: source of randomness.
+        behaviour: ``"mixed"``, ``"seated"`` or ``"low"`` (:data:`ACTIVITY_PROBABILITIES`).
 
     Returns:
         Contiguous segments from frame 0; the last one is cut at ``num_frames``.
+
+    Raises:
+        ValueError: unknown behaviour.
     """
-    kinds = list(_PROBABILITIES)
-    weights = np.array([_PROBABILITIES[k] for k in kinds])
+    if behaviour not in ACTIVITY_PROBABILITIES:
+        raise ValueError(f"behaviour={behaviour!r} is unknown; allowed: {list(ACTIVITY_PROBABILITIES)}")
+    if behaviour == "seated":
+        return [Segment("sit", 0, num_frames)]
+    probabilities = ACTIVITY_PROBABILITIES[behaviour]
+    walk_duration_s = _WALK_DURATION_S[behaviour]
+    kinds = list(probabilities)
+    weights = np.array([probabilities[k] for k in kinds])
     segments: list[Segment] = []
     frame, previous = 0, None
     while frame < num_frames:
         allowed = np.array([k != previous for k in kinds], dtype=np.float64) * weights
         kind = kinds[int(rng.choice(len(kinds), p=allowed / allowed.sum()))]
-        segment = _draw_segment(kind, frame, fps, rng)
+        segment = _draw_segment(kind, frame, fps, rng, walk_duration_s)
         stop = min(max(segment.stop, frame + 1), num_frames)
         segments.append(replace(segment, stop=stop))
         frame, previous = stop, kind
@@ -140,6 +172,8 @@ class ActivityTrack:
         turn: (F,) envelope in [0, 1] of on-the-spot turning (drives stepping in place).
         gesture: (F, G) envelope in [0, 1] of each gesture of :data:`GESTURES`.
         crouch: (F,) crouch depth envelope in [0, 1].
+        sit: (F,) envelope in [0, 1] of sitting (1: seated).
+        bend: (F,) bend depth envelope in [0, 1] (the trunk bends forward ``100 * bend`` degrees at the hips).
     """
 
     label: np.ndarray
@@ -149,6 +183,8 @@ class ActivityTrack:
     turn: np.ndarray
     gesture: np.ndarray
     crouch: np.ndarray
+    sit: np.ndarray
+    bend: np.ndarray
 
 
 def activity_track(segments: list[Segment], num_frames: int, fps: float, rng: np.random.Generator) -> ActivityTrack:
@@ -170,6 +206,8 @@ def activity_track(segments: list[Segment], num_frames: int, fps: float, rng: np
     turn = np.zeros(num_frames)
     gesture = np.zeros((len(GESTURES), num_frames))
     crouch = np.zeros(num_frames)
+    sit = np.zeros(num_frames)
+    bend = np.zeros(num_frames)
     for seg in segments:
         frames = slice(seg.start, seg.stop)
         label[frames] = ACTIVITIES.index(seg.kind)
@@ -186,6 +224,10 @@ def activity_track(segments: list[Segment], num_frames: int, fps: float, rng: np
             gesture[seg.gesture, frames] = 1.0
         elif seg.kind == "crouch":
             crouch[frames] = seg.depth
+        elif seg.kind == "sit":
+            sit[frames] = 1.0
+        elif seg.kind == "bend":
+            bend[frames] = seg.depth
     return ActivityTrack(
         label=label,
         speed_mps=smooth(speed, fps),
@@ -194,4 +236,6 @@ def activity_track(segments: list[Segment], num_frames: int, fps: float, rng: np
         turn=smooth(turn, fps),
         gesture=smooth(gesture, fps).T.copy(),
         crouch=smooth(crouch, fps, width_s=1.0),
+        sit=smooth(sit, fps, width_s=1.0),
+        bend=smooth(bend, fps, width_s=1.0),
     )

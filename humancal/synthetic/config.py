@@ -14,6 +14,8 @@ from typing import Literal
 __all__ = [
     "RigKind",
     "RIG_KINDS",
+    "Behaviour",
+    "BEHAVIOURS",
     "DetectorNoise",
     "SceneConfig",
     "MAX_PEOPLE",
@@ -21,18 +23,27 @@ __all__ = [
     "MAX_VIEWS",
     "FOCAL_LIMITS_PX",
     "IMAGE_SIZE_LIMITS_PX",
+    "K1_LIMITS",
+    "PITCH_LIMITS_DEG",
 ]
 
 RigKind = Literal["ring", "arc", "h36m"]
 RIG_KINDS: tuple[str, ...] = ("ring", "arc", "h36m")
 """Camera rig layouts: a full circle, a partial circle, or the four Human3.6M cameras (external data)."""
+Behaviour = Literal["mixed", "seated", "low"]
+BEHAVIOURS: tuple[str, ...] = ("mixed", "seated", "low")
+"""What the people do: a mix of mostly upright activities, sitting all the time, or mostly off their feet."""
 
 MAX_PEOPLE = 8
 MIN_VIEWS, MAX_VIEWS = 2, 31
 FOCAL_LIMITS_PX = (500.0, 2500.0)
 """Allowed focal lengths, pixels."""
-IMAGE_SIZE_LIMITS_PX = ((640, 480), (1920, 1080))
-"""Smallest and largest allowed image (width, height), pixels."""
+IMAGE_SIZE_LIMITS_PX = ((480, 480), (1920, 1920))
+"""Smallest and largest allowed image (width, height), pixels: each side in [480, 1920], landscape or portrait."""
+K1_LIMITS = (-0.5, 0.5)
+"""Allowed radial distortion coefficient k1 (OpenCV model, normalised image coordinates)."""
+PITCH_LIMITS_DEG = (0.0, 75.0)
+"""Allowed angle of a camera's optical axis below the horizon, degrees (``camera_pitch_range_deg``)."""
 _AREA_PER_PERSON_M2 = 2.0
 """Floor area each person needs to walk about without constant collisions, square metres."""
 
@@ -173,15 +184,31 @@ class SceneConfig:
         h36m_subject: which subject's calibration of the Human3.6M rig to use (``"S1"`` .. ``"S11"``).
         focal_range_px: (min, max) focal length fx = fy, pixels, within [500, 2500]; each camera draws one.
             Ignored by the ``"h36m"`` rig, which keeps its measured focal lengths.
-        image_size_px: (width, height) of every image, pixels, between 640x480 and 1920x1080.
+        image_size_px: (width, height) of every image, pixels, each side in [480, 1920]: landscape
+            (1920, 1080) or portrait (1080, 1920) alike.
         area_size_m: (x, y) size of the rectangular capture area centred on the world origin, metres; people's
             roots stay inside it.
-        camera_height_range_m: (min, max) height of the camera centres above the floor, metres.
+        camera_height_range_m: (min, max) height of the camera centres above the floor, metres, within
+            [0.3, 10]. Ignored when ``camera_pitch_range_deg`` is set.
+        camera_pitch_range_deg: None (default: each camera's height is drawn from ``camera_height_range_m``
+            and its downward tilt follows), or (min, max) angle of the optical axis below the horizon,
+            degrees, within [0, 75]: each camera draws its tilt from it and stands on that line of sight
+            from the aim point, at the distance where the capture area fits its image; its height follows
+            (e.g. about 7-9 m at 50-60 degrees for the default area and lenses).
         area_fill: fraction of the horizontal field of view the capture area spans (sets each camera's
-            distance from its focal length), in [0.3, 1.2]; above 1 the area's edges leave the images.
+            distance from its focal length), in [0.3, 1.2]; above 1 the area's edges leave the images. With
+            ``camera_pitch_range_deg`` set: the fraction of the image half-width or half-height (whichever
+            binds) that the farthest corner of the area reaches.
         arc_span_deg: angle covered by the cameras of an ``"arc"`` rig, degrees, in [30, 330].
         height_range_m: (min, max) standing height of the people, metres, within [1.4, 2.0].
         noise: the detector model.
+        behaviour: what the people do (``docs/synthetic.md``, "Motions"): ``"mixed"`` (walk, turn, stand,
+            gesture, crouch; the default), ``"seated"`` (everyone sits on an invisible chair at a fixed spot for
+            the whole capture, with upper-body activity) or ``"low"`` (mostly off their feet: sit, crouch and
+            bend, with short walks and a little standing between).
+        distortion_k1_range: (min, max) radial distortion k1 of the lenses, within [-0.5, 0.5]; each camera
+            draws its k1 uniformly (stored in ``Camera.distortion``, the detections are projected through
+            it). (0, 0), the default, gives ideal pinholes.
     """
 
     num_people: int = 4
@@ -199,6 +226,9 @@ class SceneConfig:
     arc_span_deg: float = 150.0
     height_range_m: tuple[float, float] = (1.5, 1.95)
     noise: DetectorNoise = field(default_factory=DetectorNoise)
+    behaviour: Behaviour = "mixed"
+    distortion_k1_range: tuple[float, float] = (0.0, 0.0)
+    camera_pitch_range_deg: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         owner = "SceneConfig"
@@ -225,8 +255,8 @@ class SceneConfig:
             and h_lo <= size[1] <= h_hi
         ):
             raise ValueError(
-                f"SceneConfig.image_size_px={size!r} is out of range; allowed: integer (width, height) "
-                f"from {w_lo}x{h_lo} to {w_hi}x{h_hi}"
+                f"SceneConfig.image_size_px={size!r} is out of range; allowed: integer (width, height), "
+                f"each side in [{w_lo}, {w_hi}] (e.g. (1920, 1080) or (1080, 1920))"
             )
         area = self.area_size_m
         if not (
@@ -247,12 +277,20 @@ class SceneConfig:
         heights = _check_interval(owner, "height_range_m", self.height_range_m, 1.4, 2.0)
         if not isinstance(self.noise, DetectorNoise):
             raise ValueError(f"SceneConfig.noise must be a DetectorNoise, got {type(self.noise).__name__}")
+        if self.behaviour not in BEHAVIOURS:
+            raise ValueError(f"SceneConfig.behaviour={self.behaviour!r} is unknown; allowed: {list(BEHAVIOURS)}")
+        k1 = _check_interval(owner, "distortion_k1_range", self.distortion_k1_range, *K1_LIMITS)
+        pitch = self.camera_pitch_range_deg
+        if pitch is not None:
+            pitch = _check_interval(owner, "camera_pitch_range_deg", pitch, *PITCH_LIMITS_DEG)
         # Normalise containers to tuples of floats/ints so that equal configs compare and hash equal.
         object.__setattr__(self, "focal_range_px", focal)
         object.__setattr__(self, "image_size_px", (int(size[0]), int(size[1])))
         object.__setattr__(self, "area_size_m", (float(area[0]), float(area[1])))
         object.__setattr__(self, "camera_height_range_m", cam_h)
         object.__setattr__(self, "height_range_m", heights)
+        object.__setattr__(self, "distortion_k1_range", k1)
+        object.__setattr__(self, "camera_pitch_range_deg", pitch)
         object.__setattr__(self, "fps", float(self.fps))
 
     @property

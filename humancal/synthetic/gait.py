@@ -1,4 +1,5 @@
-"""Procedural joint angles: a walking cycle, standing sway, gestures and crouching, blended per frame.
+"""Procedural joint angles: a walking cycle, standing sway, gestures, crouching, and (from
+:mod:`humancal.synthetic.postures`) sitting and bending over, blended per frame.
 
 The walking cycle is written against the cycle fraction ``u`` in [0, 1) of each leg: the heel strikes at
 ``u = 0``, the foot stays on the floor until ``u = 0.6`` (toe-off) and swings forward until the next strike;
@@ -17,6 +18,7 @@ import numpy as np
 from humancal.synthetic.activities import GESTURES, ActivityTrack, smooth
 from humancal.synthetic.paths import Paths
 from humancal.synthetic.poses import CHANNEL_INDEX, CHANNELS
+from humancal.synthetic.postures import apply_bend, apply_sit, draw_seated_posture, seated_channels
 
 __all__ = ["Style", "draw_style", "cadence_steps_per_s", "gait_channels"]
 
@@ -127,7 +129,8 @@ def gait_channels(
         leg_length_m: hip-to-ankle length of the person, metres (sets the hip swing for a step length).
         style: the person's :class:`Style`.
         fps: frames per second.
-        rng: source of randomness (sway and head motion).
+        rng: source of randomness (sway and head motion; a seated posture and upper-body activity when the
+            person sits at some point).
 
     Returns:
         channels: (F, C) degrees, columns ``humancal.synthetic.poses.CHANNELS``.
@@ -190,6 +193,10 @@ def gait_channels(
 
     c = _apply_gestures(c, track, fps)
     c = _apply_crouch(c, track.crouch)
+    if track.bend.any():
+        c = apply_bend(c, track.bend)
+    if track.sit.any():
+        c = apply_sit(c, track.sit, seated_channels(draw_seated_posture(rng), num_frames, fps, rng))
     # Round off the corners of the piecewise gait curves (toe-off, heel strike) over a tenth of a second.
     return smooth(c.T, fps, width_s=0.1).T.copy(), sway
 

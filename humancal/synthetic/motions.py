@@ -3,7 +3,8 @@ with the feet put on the floor.
 
 Feet on the floor is done the simple, honest way: after forward kinematics each frame's root is raised or
 lowered so that the lowest foot keypoint (ankles, toes, heels) touches z = 0, which also yields the vertical
-bob of walking. While crouching, the root is additionally moved back so that the ankles stay where the
+bob of walking (and the seat height of a seated person: feet flat, so the pelvis sits at knee height).
+While crouching, sitting or bending over, the root is additionally moved so that the ankles stay where the
 person stood (the hips go back when the knees go forward). Walking feet may slide a little: steps are sized
 from speed and leg length, not planted by inverse kinematics.
 """
@@ -20,7 +21,7 @@ from humancal.body import BodyModel, RestSkeleton
 from humancal.keypoints import joint_indices
 from humancal.synthetic.activities import ACTIVITIES, activity_track, plan_activities
 from humancal.synthetic.gait import draw_style, gait_channels
-from humancal.synthetic.paths import simulate_paths
+from humancal.synthetic.paths import seated_paths, simulate_paths
 from humancal.synthetic.poses import arm_geometry, channels_to_rotmats
 
 __all__ = ["Motions", "generate_motions", "FOOT_JOINTS"]
@@ -86,6 +87,7 @@ def generate_motions(
     fps: float,
     area_size_m: tuple[float, float],
     rng: np.random.Generator,
+    behaviour: str = "mixed",
 ) -> Motions:
     """Random activities for every person of ``rest``, simulated together in one capture area.
 
@@ -96,13 +98,24 @@ def generate_motions(
         fps: frames per second.
         area_size_m: (x, y) size of the capture area centred on the origin, metres.
         rng: source of randomness.
+        behaviour: ``"mixed"``, ``"seated"`` (everyone seated at a fixed spot all the time) or ``"low"``
+            (mostly sitting, crouching and bending over); see ``SceneConfig.behaviour``.
 
     Returns:
         The :class:`Motions`.
+
+    Raises:
+        ValueError: unknown behaviour.
     """
     num_people = rest.num_people
-    tracks = [activity_track(plan_activities(num_frames, fps, rng), num_frames, fps, rng) for _ in range(num_people)]
-    paths = simulate_paths(tracks, area_size_m, fps, rng)
+    tracks = [
+        activity_track(plan_activities(num_frames, fps, rng, behaviour), num_frames, fps, rng)
+        for _ in range(num_people)
+    ]
+    if behaviour == "seated":
+        paths = seated_paths(num_people, num_frames, area_size_m, fps, rng)
+    else:
+        paths = simulate_paths(tracks, area_size_m, fps, rng)
     heads = rest.bone_heads_m.detach().double().cpu().numpy()
 
     rotmats = np.empty((num_people, num_frames, body.num_posed_bones, 3, 3))
@@ -125,9 +138,12 @@ def generate_motions(
     translation = np.concatenate([root_xy, np.zeros((num_people, num_frames, 1))], axis=-1)
     keypoints = _keypoints(body, rest, rotmats_t, translation)
 
-    # Lowest foot point on the floor; while crouching, keep the ankles above the spot the person stands on.
+    # Lowest foot point on the floor; while crouching, sitting or bending, keep the ankles above the spot the
+    # person stands on.
     translation[..., 2] = -keypoints[..., _FOOT_INDEX, 2].min(axis=-1)
     crouch = np.stack([t.crouch for t in tracks])
+    if behaviour != "mixed":
+        crouch = crouch + np.stack([t.sit + t.bend for t in tracks])
     ankle_xy = keypoints[..., _ANKLE_INDEX, :2].mean(axis=-2)
     # Full anchoring from a quarter of the crouch depth on (the offset is still small there).
     anchor = np.clip(4.0 * crouch, 0.0, 1.0)

@@ -16,7 +16,7 @@ import numpy as np
 
 from humancal.synthetic.activities import ActivityTrack
 
-__all__ = ["Paths", "simulate_paths", "initial_positions"]
+__all__ = ["Paths", "simulate_paths", "initial_positions", "seated_paths", "SEATING_LAYOUTS"]
 
 _SPEED_TIME_CONSTANT_S = 0.4
 _MAX_YAW_RATE_RAD_S = 2.5
@@ -24,6 +24,11 @@ _EDGE_LOOKAHEAD_S = 0.8
 _EDGE_GAIN = 2.5
 _AVOID_RANGE_M = 1.8
 _AVOID_GAIN = 1.6
+SEATING_LAYOUTS: tuple[str, ...] = ("circle", "audience", "scattered")
+"""How seated people face: towards the area centre (a meeting, a band), all one way (an audience), or each
+its own way."""
+_SEAT_SHIFT_M = 0.04
+_SEAT_TURN_DEG = 8.0
 
 
 @dataclass(frozen=True)
@@ -161,3 +166,59 @@ def simulate_paths(
         out_heading[:, f] = heading
         out_speed[:, f] = speed
     return Paths(position_m=out_position, heading_rad=out_heading, speed_mps=out_speed)
+
+
+def _wander(
+    rng: np.random.Generator, shape: tuple[int, ...], num_frames: int, fps: float, period_s: float
+) -> np.ndarray:
+    """Smooth random wandering in [-1, 1], shape ``shape + (F,)``: eased values every ``period_s`` seconds."""
+    knots = int(np.ceil(num_frames / fps / period_s)) + 2
+    values = np.clip(rng.normal(0.0, 0.6, shape + (knots,)), -1.0, 1.0)
+    t = np.arange(num_frames) / (fps * period_s)
+    index = np.floor(t).astype(np.int64)
+    ease = 0.5 - 0.5 * np.cos(np.pi * (t - index))
+    return (1.0 - ease) * values[..., index] + ease * values[..., index + 1]
+
+
+def seated_paths(
+    num_people: int,
+    num_frames: int,
+    area_size_m: tuple[float, float],
+    fps: float,
+    rng: np.random.Generator,
+    margin_m: float = 0.8,
+    min_separation_m: float = 0.8,
+) -> Paths:
+    """Fixed seats for everybody: spots spread over the area and facing one of :data:`SEATING_LAYOUTS`, with
+    small slow shifts on the seat (a few centimetres, a few degrees).
+
+    Args:
+        num_people: P.
+        num_frames: F.
+        area_size_m: (x, y) size of the capture area centred on the origin, metres.
+        fps: frames per second.
+        rng: source of randomness.
+        margin_m: the spots stay at least this far inside the area's edges (room for the chair), metres.
+        min_separation_m: half the smallest distance between two spots (relaxed when the area is crowded),
+            metres.
+
+    Returns:
+        The :class:`Paths` (speed 0): ``position_m`` is where the feet are, ``heading_rad`` where the person
+        faces.
+    """
+    half = np.maximum(np.array(area_size_m, dtype=np.float64) / 2.0 - margin_m, 0.3)
+    spot = initial_positions(num_people, half, min_separation_m, rng)
+    layout = SEATING_LAYOUTS[int(rng.integers(len(SEATING_LAYOUTS)))]
+    if layout == "circle":
+        heading = np.arctan2(-spot[:, 1], -spot[:, 0]) + np.radians(rng.normal(0.0, 15.0, num_people))
+    elif layout == "audience":
+        heading = rng.uniform(-np.pi, np.pi) + np.radians(rng.normal(0.0, 10.0, num_people))
+    else:
+        heading = rng.uniform(-np.pi, np.pi, num_people)
+    shift = _SEAT_SHIFT_M * _wander(rng, (num_people, 2), num_frames, fps, 6.0)
+    turn = np.radians(_SEAT_TURN_DEG) * _wander(rng, (num_people,), num_frames, fps, 5.0)
+    return Paths(
+        position_m=spot[:, None, :] + shift.transpose(0, 2, 1),
+        heading_rad=_wrap(heading[:, None] + turn),
+        speed_mps=np.zeros((num_people, num_frames)),
+    )

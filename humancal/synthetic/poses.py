@@ -58,6 +58,7 @@ CHANNELS: tuple[str, ...] = (
     "elbow_flex_r",
     "pelvis_yaw",
     "pelvis_roll",
+    "pelvis_pitch",
 )
 """Joint-angle channels, degrees. Meanings (positive direction):
 
@@ -69,7 +70,9 @@ CHANNELS: tuple[str, ...] = (
 * ``shoulder_flex_*``: arm forward; ``arm_elev_*``: angle of the upper arm from vertical in the body's
   frontal plane (0 = hanging); ``arm_twist_*``: external rotation of the upper arm about its own axis;
   ``elbow_flex_*``: forearm bend (0 = straight arm).
-* ``pelvis_yaw``: pelvis turns left (relative to the heading); ``pelvis_roll``: pelvis tilts left side down.
+* ``pelvis_yaw``: pelvis turns left (relative to the heading); ``pelvis_roll``: pelvis tilts left side down;
+  ``pelvis_pitch``: pelvis (and with it the trunk) tilts forward; the thighs turn with it, so a hip flexion
+  of the same angle keeps them where they were (bending over with straight legs, leaning while seated).
 """
 
 CHANNEL_INDEX: dict[str, int] = {name: i for i, name in enumerate(CHANNELS)}
@@ -202,13 +205,19 @@ def channels_to_rotmats(
 
     yaw_deg = np.degrees(np.asarray(body_yaw_rad, dtype=np.float64)) + ch("pelvis_yaw")
     out[:, index["root"]] = _rot("z", yaw_deg) @ _rot("y", ch("pelvis_roll"))
+    pitch = ch("pelvis_pitch")
+    tilted = bool(np.any(pitch))
+    if tilted:
+        out[:, index["root"]] = out[:, index["root"]] @ _rot("x", pitch)
     for side, bone in (("l", "L"), ("r", "R")):
         sign = 1.0 if side == "l" else -1.0
         hip, knee = ch(f"hip_flex_{side}"), ch(f"knee_flex_{side}")
         out[:, index[f"upperleg01.{bone}"]] = _rot("x", -hip) @ _rot("y", -sign * ch(f"hip_abd_{side}"))
         out[:, index[f"lowerleg01.{bone}"]] = _rot("x", knee)
-        # The foot's pitch in the world is -hip + knee - dorsiflexion (about +x); solve for the ankle.
+        # The foot's pitch in the world is pelvis pitch - hip + knee - dorsiflexion (about +x); solve for the ankle.
         dorsiflexion = knee - hip + ch(f"foot_pitch_{side}")
+        if tilted:
+            dorsiflexion = dorsiflexion + pitch
         out[:, index[f"foot.{bone}"]] = _rot("x", -dorsiflexion)
         out[:, index[f"toes.{bone}"]] = _rot("x", -ch(f"toe_ext_{side}"))
         upper, fore = _arm_rotations(channels, geometry, side)

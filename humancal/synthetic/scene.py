@@ -238,7 +238,9 @@ def generate_scene(
     report("people", 0.1)
     with torch.no_grad():
         rest = body.rest_skeleton(torch.as_tensor(people.phenotypes, dtype=body.dtype, device=body.device))
-    motions = generate_motions(body, rest, config.num_frames, config.fps, config.area_size_m, rng_motion)
+    motions = generate_motions(
+        body, rest, config.num_frames, config.fps, config.area_size_m, rng_motion, behaviour=config.behaviour
+    )
     report("motions", 0.4)
     rig = make_rig(config, rng_rig)
     report("cameras", 0.45)

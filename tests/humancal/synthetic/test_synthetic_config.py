@@ -29,8 +29,9 @@ from humancal.synthetic import PRESETS, DetectorNoise, SceneConfig, preset, pres
         ({"focal_range_px": (1000.0, 3000.0)}, "focal_range_px", "[500.0, 2500.0]"),
         ({"focal_range_px": (1500.0, 1000.0)}, "focal_range_px", "min <= max"),
         ({"focal_range_px": 1000.0}, "focal_range_px", "(min, max)"),
-        ({"image_size_px": (320, 240)}, "image_size_px", "640x480 to 1920x1080"),
-        ({"image_size_px": (3840, 2160)}, "image_size_px", "640x480 to 1920x1080"),
+        ({"image_size_px": (320, 240)}, "image_size_px", "each side in [480, 1920]"),
+        ({"image_size_px": (3840, 2160)}, "image_size_px", "each side in [480, 1920]"),
+        ({"image_size_px": (1080, 2160)}, "image_size_px", "each side in [480, 1920]"),
         ({"image_size_px": (1280.0, 720.0)}, "image_size_px", "integer"),
         ({"area_size_m": (1.0, 5.0)}, "area_size_m", "[2, 30]"),
         ({"num_people": 8, "area_size_m": (3.0, 3.0)}, "area_size_m", "at least 16.0 m^2"),
@@ -39,6 +40,13 @@ from humancal.synthetic import PRESETS, DetectorNoise, SceneConfig, preset, pres
         ({"arc_span_deg": 360.0}, "arc_span_deg", "[30.0, 330.0]"),
         ({"height_range_m": (1.2, 1.9)}, "height_range_m", "[1.4, 2.0]"),
         ({"noise": {"jitter_std_frac": 0.1}}, "noise", "DetectorNoise"),
+        ({"behaviour": "dancing"}, "behaviour", "'mixed', 'seated', 'low'"),
+        ({"distortion_k1_range": (-0.6, 0.0)}, "distortion_k1_range", "[-0.5, 0.5]"),
+        ({"distortion_k1_range": (0.2, 0.1)}, "distortion_k1_range", "min <= max"),
+        ({"distortion_k1_range": 0.1}, "distortion_k1_range", "(min, max)"),
+        ({"camera_pitch_range_deg": (-5.0, 30.0)}, "camera_pitch_range_deg", "[0.0, 75.0]"),
+        ({"camera_pitch_range_deg": (50.0, 80.0)}, "camera_pitch_range_deg", "[0.0, 75.0]"),
+        ({"camera_pitch_range_deg": 60.0}, "camera_pitch_range_deg", "(min, max)"),
     ],
 )
 def test_scene_config_rejects_bad_values_with_a_one_line_message(changes, field, allowed):
@@ -108,3 +116,20 @@ def test_preset_overrides_and_unknown_name():
         preset("demoo")
     with pytest.raises(ValueError, match="num_views"):
         preset("tiny", num_views=40)
+
+
+def test_new_fields_default_to_todays_scenes_and_accept_the_documented_values():
+    config = SceneConfig()
+    assert config.behaviour == "mixed"
+    assert config.distortion_k1_range == (0.0, 0.0)
+    assert config.camera_pitch_range_deg is None
+    for behaviour in ("mixed", "seated", "low"):
+        assert SceneConfig(behaviour=behaviour).behaviour == behaviour
+    assert SceneConfig(image_size_px=(1080, 1920)).image_size_px == (1080, 1920)
+    assert SceneConfig(image_size_px=(480, 480)).image_size_px == (480, 480)
+    portrait_lens = SceneConfig(
+        image_size_px=[720, 1280], distortion_k1_range=[-0.3, 0], camera_pitch_range_deg=[50, 70]
+    )
+    assert portrait_lens.distortion_k1_range == (-0.3, 0.0)  # lists normalised to tuples of floats
+    assert portrait_lens.camera_pitch_range_deg == (50.0, 70.0)
+    assert hash(portrait_lens) == hash(portrait_lens.replace())
