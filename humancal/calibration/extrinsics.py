@@ -28,6 +28,7 @@ import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 import pandas as pd
@@ -277,7 +278,7 @@ def _best_start(adjust, f, t, points, unseen, diag, bounds, detections, lifted, 
 
     Returns the chosen focal lengths, translations, keypoints and a description of the start.
     """
-    best = (adjust(f, t, points, config.blind_start_iterations).cost, f, t, points, "the other views' field of view")
+    best = (adjust(f, t_start=t, points_start=points, iterations=config.blind_start_iterations).cost, f, t, points, "the other views' field of view")
     tight = np.full(len(f), 1e-3)
     for fov in config.blind_start_fov_deg:
         f_s = np.where(unseen, np.clip(0.5 * diag / np.tan(np.radians(fov) / 2), bounds[:, 0], bounds[:, 1]), f)
@@ -289,7 +290,7 @@ def _best_start(adjust, f, t, points, unseen, diag, bounds, detections, lifted, 
         t_s = sol_s.t_cam_from_world_m
         points_s = _initial_points(groups, lifted, np.nan_to_num(roots_s.T_cam_m), detections.view, R, t_s)
         try:
-            cost = adjust(f_s, t_s, points_s, config.blind_start_iterations).cost
+            cost = adjust(f_s, t_start=t_s, points_start=points_s, iterations=config.blind_start_iterations).cost
         except CalibrationError:  # a start the bundle adjustment refuses (non-finite keypoints) is no candidate
             continue
         if cost < best[0]:
@@ -384,7 +385,7 @@ def estimate_extrinsics(
             break
         f_frame = f.copy()
         lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
-    lifted = lifted_cam
+    lifted_as_given, lifted = lifted, lifted_cam
 
     clock = time.perf_counter()
     groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections))
@@ -412,21 +413,33 @@ def estimate_extrinsics(
     logger.info("linear focal std (data only) %s", np.round(sol.focal_rel_std_data, 3).tolist())
     _require_finite(t_init, "translations before the bundle adjustment")
     points = _initial_points(groups, lifted, np.nan_to_num(roots.T_cam_m), detections.view, R, t_init)
-    adjust = lambda f_start, t_start, points_start, iterations: bundle_adjust(  # noqa: E731
-        detections, lifted, groups, points_start, f_start, f_start, pp, R, t_start,
-        square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
-        shape_std_m=config.shape_std_m, group_scale_std=config.person_scale_std, focal_bounds_px=bounds,
-        max_iterations=iterations,
-    )
+
+    def adjust(f_start, R_start, t_start, points_start, iterations, lifted_cam=lifted):
+        return bundle_adjust(
+            detections, lifted_cam, groups, points_start, f_start, f_start, pp, R_start, t_start,
+            square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
+            shape_std_m=config.shape_std_m, group_scale_std=config.person_scale_std, focal_bounds_px=bounds,
+            max_iterations=iterations,
+        )
+
     with _stage("bundle adjustment"):
         unseen = blind & ~resected
         if unseen.any() and config.blind_start_fov_deg:
-            f, t_init, points, started = _best_start(adjust, f, t_init, points, unseen, diag, bounds, detections,
-                                                     lifted, groups, rows_a[sol.inlier], rows_b[sol.inlier], R,
-                                                     pp, config)
+            f, t_init, points, started = _best_start(partial(adjust, R_start=R), f, t_init, points, unseen, diag,
+                                                     bounds, detections, lifted, groups, rows_a[sol.inlier],
+                                                     rows_b[sol.inlier], R, pp, config)
             logger.info("views %s: started the bundle adjustment from %s px (%s)", np.flatnonzero(unseen).tolist(),
                         np.round(f[unseen]).tolist(), started)
-        ba = adjust(f, t_init, points, config.bundle_iterations)
+        ba = adjust(f, R, t_init, points, config.bundle_iterations)
+        for _ in range(3 if lifted_as_given.frame == "crop" else 0):
+            if np.max(np.abs(np.log(ba.fx_px / f_frame))) < 0.02:
+                break
+            # the crop-frame poses were turned into camera frames at focal lengths the bundle adjustment has
+            # since moved away from: turn them again at its focal lengths and refine once more from its result
+            f_frame = ba.fx_px.copy()
+            lifted = lifted_as_given.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
+            ba = adjust(ba.fx_px, ba.R_cam_from_world, ba.t_cam_from_world_m, ba.points_world_m,
+                        config.bundle_iterations, lifted)
     _require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
                     "bundle adjustment")
     timings["bundle"] = time.perf_counter() - clock
