@@ -2,7 +2,8 @@
 
 Per view, for every person and frame (all vectorised with numpy; the only loop is over views):
 
-1. project the 23 keypoints; joints behind the camera or outside the image are not seen;
+1. project the 23 keypoints through the lens (its distortion included); joints behind the camera, outside
+   the image, or beyond the radius where a barrel lens model folds back on itself are not seen;
 2. occlusion degree of each joint from a capsule model of all bodies (:mod:`humancal.synthetic.occlusion`);
 3. a person is *eligible* when at least ``min_visible_joints`` joints are in the image and not fully occluded;
    an eligible person is missed with probability ``person_miss_rate``;
@@ -92,6 +93,46 @@ class DetectorOutput:
         return int(self.frame.shape[0])
 
 
+def _fold_radius(distortion: np.ndarray) -> float:
+    """Undistorted radius (normalised image coordinates) where the radial lens model stops growing: the
+    first zero of ``d/dr [r (1 + k1 r^2 + k2 r^4 + k3 r^6)]``, inf for an ideal pinhole or a lens that never
+    folds within the range that matters (r <= 4, about 76 degrees off axis)."""
+    k1, k2, _, _, k3 = np.asarray(distortion, dtype=np.float64)
+    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0:
+        return float("inf")
+    r = np.linspace(0.0, 4.0, 4001)
+    r2 = r * r
+    slope = 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + r2 * 7.0 * k3))
+    folds = np.nonzero(slope <= 0.0)[0]
+    return float(r[folds[0]]) if len(folds) else float("inf")
+
+
+def _within_lens(camera: Camera, points_world_m: np.ndarray) -> np.ndarray:
+    """(...,) whether each point lies inside the radius where the camera's lens model is one-to-one."""
+    fold = _fold_radius(camera.distortion)
+    if not np.isfinite(fold):
+        return np.ones(points_world_m.shape[:-1], bool)
+    x_cam = points_world_m @ camera.R_cam_from_world.T + camera.t_cam_from_world_m
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.hypot(x_cam[..., 0], x_cam[..., 1]) / x_cam[..., 2]
+    return np.nan_to_num(r, nan=np.inf) < fold
+
+
+def _distort(uv: np.ndarray, distortion: np.ndarray) -> np.ndarray:
+    """OpenCV lens distortion of normalised image points ``uv`` (N, J, 2) with per-row coefficients (N, 5)."""
+    k1, k2, p1, p2, k3 = (distortion[:, i, None] for i in range(5))
+    x, y = uv[..., 0], uv[..., 1]
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    return np.stack(
+        [
+            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+        ],
+        axis=-1,
+    )
+
+
 def _inside(pixels_px: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
     x, y = pixels_px[..., 0], pixels_px[..., 1]
     with np.errstate(invalid="ignore"):
@@ -146,7 +187,7 @@ def _view_detections(
     """Detections of the real people in one view (see the module docstring, steps 1-7)."""
     num_people, num_frames = keypoints_world_m.shape[:2]
     pixels, depth = project_points(camera, keypoints_world_m)
-    in_front = np.nan_to_num(depth, nan=-1.0) > 0.05
+    in_front = (np.nan_to_num(depth, nan=-1.0) > 0.05) & _within_lens(camera, keypoints_world_m)
     pixels = np.where(in_front[..., None], pixels, np.nan)
     in_image = in_front & _inside(pixels, camera.width_px, camera.height_px)
     pelvis_depth = np.maximum(depth[..., _HIPS].mean(axis=-1), 0.1)
@@ -233,10 +274,16 @@ def _false_positives(
     x_cam = np.einsum("nij,nkj->nki", R, pose) + pelvis_cam[:, None, :]
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = x_cam[..., :2] / x_cam[..., 2:3]
+    in_front = x_cam[..., 2] > 0.05
+    distortion = np.stack([c.distortion for c in cameras])[view]
+    if np.any(distortion):
+        fold = np.array([_fold_radius(c.distortion) for c in cameras])[view]
+        with np.errstate(invalid="ignore"):
+            in_front &= np.nan_to_num(np.hypot(uv[..., 0], uv[..., 1]), nan=np.inf) < fold[:, None]
+            uv = _distort(uv, distortion)
     focal = np.stack([K[:, 0, 0], K[:, 1, 1]], axis=-1)[:, None, :]
     centre = np.stack([K[:, 0, 2], K[:, 1, 2]], axis=-1)[:, None, :]
     pixels = uv * focal + centre
-    in_front = x_cam[..., 2] > 0.05
     scale = K[:, 0, 0] * height_m[source_person] / depth
     detected_px = pixels + _jitter(noise, jitter_draws, np.zeros((n, NUM_JOINTS), bool), jitter_draws, 0.0, scale)
     inside = in_front & (detected_px[..., 0] >= 0) & (detected_px[..., 0] < size[:, None, 0])

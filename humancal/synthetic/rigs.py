@@ -1,8 +1,10 @@
 """Static camera rigs around the capture area: random rings and arcs, and the Human3.6M cameras.
 
-Every camera is an ideal pinhole (no distortion) with square pixels and the principal point at the image
-centre, placed so that the capture area fills about ``area_fill`` of its horizontal field of view, aimed at a
-point near the area centre at mid-body height with a little random error in aim and roll.
+Every camera has square pixels and the principal point at the image centre, is placed so that the capture
+area fills about ``area_fill`` of its horizontal field of view (or, with ``camera_pitch_range_deg``, of the
+image extent that binds at the drawn tilt), and is aimed at a point near the area centre at mid-body height
+with a little random error in aim and roll. Lenses are ideal pinholes unless ``distortion_k1_range`` asks for
+radial distortion; the placement then makes sure the area fits the distorted image too.
 """
 
 from __future__ import annotations
@@ -17,7 +19,16 @@ from humancal.camera import Camera
 from humancal.settings import dataset_dir
 from humancal.synthetic.config import SceneConfig
 
-__all__ = ["look_at", "intrinsics", "make_rig", "ring_rig", "h36m_rig", "load_h36m_cameras"]
+__all__ = [
+    "look_at",
+    "intrinsics",
+    "make_rig",
+    "ring_rig",
+    "h36m_rig",
+    "load_h36m_cameras",
+    "undistorted_radius",
+    "monotonic_radius",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -27,6 +38,8 @@ _AIM_JITTER_M = 0.25
 _ROLL_JITTER_DEG = 2.0
 _BODY_RADIUS_M = 0.5
 """Added to the area's half-diagonal when fitting it into a field of view (arms and bodies at the edge)."""
+_FIT_HEIGHT_M = 2.0
+"""Height of the box fitted into the image by cameras with a drawn tilt (standing heads and raised hands)."""
 
 
 def look_at(center_world_m: np.ndarray, target_world_m: np.ndarray, roll_deg: float = 0.0) -> np.ndarray:
@@ -65,12 +78,85 @@ def intrinsics(focal_px: float, width_px: int, height_px: int) -> np.ndarray:
     return np.array([[focal_px, 0.0, width_px / 2.0], [0.0, focal_px, height_px / 2.0], [0.0, 0.0, 1.0]])
 
 
+def monotonic_radius(k1: float) -> float:
+    """Largest undistorted radius (normalised image coordinates) up to which the radial model
+    ``r_d = r (1 + k1 r^2)`` grows with ``r``: ``1 / sqrt(-3 k1)`` for barrel distortion (k1 < 0), else inf.
+
+    Beyond it a barrel lens model folds points from outside the field of view back into the image, so the
+    detector treats such points as unseen.
+    """
+    return float(1.0 / np.sqrt(-3.0 * k1)) if k1 < 0.0 else float("inf")
+
+
+def undistorted_radius(distorted_radius: np.ndarray, k1: np.ndarray) -> np.ndarray:
+    """Undistorted radius whose image under ``r_d = r (1 + k1 r^2)`` is ``distorted_radius`` (normalised
+    image coordinates), capped at :func:`monotonic_radius` where the distorted radius is out of reach.
+
+    Args:
+        distorted_radius: (N,) radii in the image plane, normalised (pixels / focal).
+        k1: (N,) radial coefficients.
+
+    Returns:
+        (N,) undistorted radii (the same where k1 = 0).
+    """
+    r_d = np.asarray(distorted_radius, dtype=np.float64)
+    k = np.broadcast_to(np.asarray(k1, dtype=np.float64), r_d.shape)
+    r_max = np.array([monotonic_radius(v) for v in k.reshape(-1)]).reshape(k.shape)
+    low, high = np.zeros_like(r_d), np.minimum(r_max, r_d * 2.0 + 1.0)
+    # Bisection on the monotonic branch: r (1 + k1 r^2) grows from 0 on [0, r_max].
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        below = mid * (1.0 + k * mid * mid) < r_d
+        low, high = np.where(below, mid, low), np.where(below, high, mid)
+    return np.where(k == 0.0, r_d, 0.5 * (low + high))
+
+
+def _fit_distance_m(
+    config: SceneConfig, pitch_rad: float, half_extent: tuple[float, float], aim_world_m: np.ndarray
+) -> float:
+    """Distance from the aim point, along a line of sight tilted ``pitch_rad`` below the horizon, at which the
+    box of the capture area (plus a body radius, from the floor to head height) spans ``area_fill`` of the
+    image half-extent that binds (``half_extent``: undistorted normalised half-width and half-height)."""
+    half = np.array(config.area_size_m) / 2.0 + _BODY_RADIUS_M
+    corners = np.array(
+        [[sx * half[0], sy * half[1], z] for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, _FIT_HEIGHT_M)]
+    )
+    limit = config.area_fill * np.asarray(half_extent)
+    # The box's extent seen at a given tilt barely depends on the azimuth of a ring camera (the area is a
+    # rectangle, not a disc); the worst of four azimuths keeps every camera's fit on the safe side.
+    def reaches(distance_m: float) -> float:
+        worst = 0.0
+        for azimuth in (0.0, 0.25 * np.pi, 0.5 * np.pi, 0.75 * np.pi):
+            direction = np.array([np.cos(azimuth) * np.cos(pitch_rad), np.sin(azimuth) * np.cos(pitch_rad),
+                                  np.sin(pitch_rad)])
+            center = aim_world_m + distance_m * direction
+            R = look_at(center, aim_world_m)
+            x_cam = (corners - center) @ R.T
+            if np.any(x_cam[:, 2] <= 0.1):
+                return np.inf
+            normalised = np.abs(x_cam[:, :2] / x_cam[:, 2:3]) / limit
+            worst = max(worst, float(normalised.max()))
+        return worst
+
+    low, high = 0.5, 200.0
+    for _ in range(50):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if reaches(mid) > 1.0 else (low, mid)
+    return high
+
+
 def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     """Cameras on a full circle (``"ring"``) or on an arc of ``arc_span_deg`` (``"arc"``) around the area.
 
     Azimuths are evenly spaced with a random jitter of a quarter spacing; each camera draws its focal length
     from ``focal_range_px`` and its height from ``camera_height_range_m``, then stands at the distance where
-    the area (plus a body radius) spans ``area_fill`` of its horizontal field of view.
+    the area (plus a body radius) spans ``area_fill`` of its horizontal field of view. With
+    ``camera_pitch_range_deg`` set, each camera draws its tilt below the horizon instead of its height and
+    stands on that line of sight through the aim point, at the distance where the box of the area (plus a
+    body radius, floor to 2 m) spans ``area_fill`` of the binding image half-extent; its height follows.
+    With ``distortion_k1_range`` other than (0, 0), each camera finally draws its k1; a pincushion lens
+    (k1 > 0) narrows the fields of view above to what its images show, a barrel lens leaves the placement of
+    a pinhole (it only pulls the image points inwards) unless its model folds back inside the image.
 
     Args:
         config: the scene config (``rig`` must be ``"ring"`` or ``"arc"``).
@@ -92,17 +178,55 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
         raise ValueError(f"ring_rig: config.rig={config.rig!r} is not 'ring' or 'arc'")
     azimuth = azimuth + rng.uniform(-0.25, 0.25, num) * spacing
     focal = rng.uniform(*config.focal_range_px, num)
-    cam_height = rng.uniform(*config.camera_height_range_m, num)
-    radius = 0.5 * float(np.hypot(*config.area_size_m)) + _BODY_RADIUS_M
-    half_fov = np.arctan(width / (2.0 * focal))
-    distance = radius / np.sin(config.area_fill * half_fov)
+    tilted = config.camera_pitch_range_deg is not None
+    if tilted:
+        pitch = np.radians(rng.uniform(*config.camera_pitch_range_deg, num))
+    else:
+        cam_height = rng.uniform(*config.camera_height_range_m, num)
+    targets, rolls = [], []
+    for _ in range(num):
+        targets.append(np.array([*rng.normal(0.0, _AIM_JITTER_M, 2), _AIM_HEIGHT_M + rng.normal(0.0, 0.1)]))
+        rolls.append(float(rng.normal(0.0, _ROLL_JITTER_DEG)))
+    distorted = config.distortion_k1_range != (0.0, 0.0)
+    k1 = rng.uniform(*config.distortion_k1_range, num) if distorted else np.zeros(num)
+    # Normalised half-width and half-height of the (undistorted) view that the image shows. A pincushion lens
+    # (k1 > 0) pushes points outwards: it shows less, and the cameras step back. A barrel lens (k1 < 0) shows
+    # more, but pulls the points inwards unevenly (more along the diagonal than the narrow side); the cameras
+    # stand where a pinhole would, so the area fits either way, unless the lens model folds back on itself
+    # inside the image (strong k1, wide lens): then only the view inside the fold radius counts.
+    half_w = width / (2.0 * focal)
+    half_h = height / (2.0 * focal)
+    if distorted:
+        half_w = np.minimum(undistorted_radius(half_w, k1), half_w)
+        half_h = np.minimum(undistorted_radius(half_h, k1), half_h)
     cameras = []
+    if tilted:
+        nominal_aim = np.array([0.0, 0.0, _AIM_HEIGHT_M])
+        for v in range(num):
+            distance = _fit_distance_m(config, float(pitch[v]), (half_w[v], half_h[v]), nominal_aim)
+            direction = np.array([np.cos(azimuth[v]) * np.cos(pitch[v]), np.sin(azimuth[v]) * np.cos(pitch[v]),
+                                  np.sin(pitch[v])])
+            center = targets[v] + distance * direction
+            cameras.append(_camera(focal[v], k1[v], center, targets[v], rolls[v], width, height))
+        return cameras
+    radius = 0.5 * float(np.hypot(*config.area_size_m)) + _BODY_RADIUS_M
+    half_fov = np.arctan(half_w) if distorted else np.arctan(width / (2.0 * focal))
+    distance = radius / np.sin(config.area_fill * half_fov)
     for v in range(num):
         center = np.array([distance[v] * np.cos(azimuth[v]), distance[v] * np.sin(azimuth[v]), cam_height[v]])
-        target = np.array([*rng.normal(0.0, _AIM_JITTER_M, 2), _AIM_HEIGHT_M + rng.normal(0.0, 0.1)])
-        R = look_at(center, target, roll_deg=float(rng.normal(0.0, _ROLL_JITTER_DEG)))
-        cameras.append(Camera.from_center(intrinsics(focal[v], width, height), R, center, width, height))
+        cameras.append(_camera(focal[v], k1[v], center, targets[v], rolls[v], width, height))
     return cameras
+
+
+def _camera(
+    focal_px: float, k1: float, center: np.ndarray, target: np.ndarray, roll_deg: float, width: int, height: int
+) -> Camera:
+    R = look_at(center, target, roll_deg=roll_deg)
+    camera = Camera.from_center(intrinsics(focal_px, width, height), R, center, width, height)
+    if k1 == 0.0:
+        return camera
+    return Camera(camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m, width, height,
+                  np.array([k1, 0.0, 0.0, 0.0, 0.0]))
 
 
 def load_h36m_cameras(path: Path, subject: str) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
@@ -157,8 +281,8 @@ def h36m_rig(config: SceneConfig) -> list[Camera]:
     Human3.6M's world is already Z up with the floor at z = 0; it is converted from millimetres to metres
     and shifted horizontally so that the point the cameras look at lies above the origin (the centre of
     our capture area). The measured focal lengths are kept (about 1145 px), the principal point is put at
-    the centre of ``config.image_size_px`` and the lens distortion is dropped (the generator projects with
-    an ideal pinhole).
+    the centre of ``config.image_size_px`` and the file's lens distortion is dropped (:func:`make_rig` gives
+    the cameras a drawn k1 when ``distortion_k1_range`` asks for one).
 
     Raises:
         humancal.settings.DataRootError: the data root or its ``h36m_cameras`` folder is missing.
@@ -190,5 +314,10 @@ def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     if config.rig in ("ring", "arc"):
         return ring_rig(config, rng)
     if config.rig == "h36m":
-        return h36m_rig(config)
+        cameras = h36m_rig(config)
+        if config.distortion_k1_range == (0.0, 0.0):
+            return cameras
+        k1 = rng.uniform(*config.distortion_k1_range, len(cameras))
+        return [Camera(c.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px,
+                       np.array([k, 0.0, 0.0, 0.0, 0.0])) for c, k in zip(cameras, k1)]
     raise ValueError(f"SceneConfig.rig={config.rig!r} is unknown; allowed: 'ring', 'arc', 'h36m'")

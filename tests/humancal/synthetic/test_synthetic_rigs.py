@@ -106,3 +106,69 @@ def test_h36m_rig_from_the_real_calibration():
     focal = np.array([c.K[0, 0] for c in cameras])
     np.testing.assert_allclose(focal, 1146.0, atol=5.0)
     assert len(make_rig(config.replace(num_views=2), np.random.default_rng(0))) == 2
+
+
+def _pitch_deg(camera) -> float:
+    """Angle of the optical axis below the horizon, degrees."""
+    return float(np.degrees(np.arcsin(-camera.R_cam_from_world[2, 2])))
+
+
+def _area_box(config, top_m: float = 1.8) -> np.ndarray:
+    half = np.array(config.area_size_m) / 2
+    return np.array([[sx * half[0], sy * half[1], z] for sx in (-1, 1) for sy in (-1, 1) for z in (0.0, top_m)])
+
+
+def _inside_image(camera, points) -> np.ndarray:
+    pixel, depth = project_points(camera, points)
+    return (depth > 0) & (pixel[:, 0] >= 0) & (pixel[:, 0] < camera.width_px) & (pixel[:, 1] >= 0) & (
+        pixel[:, 1] < camera.height_px
+    )
+
+
+@pytest.mark.parametrize("size", [(1080, 1920), (720, 1280)])
+def test_portrait_rigs_fit_the_area_into_the_narrow_width(size):
+    config = SceneConfig(num_views=8, image_size_px=size, seed=2)
+    cameras = make_rig(config, np.random.default_rng(5))
+    _check_rig(cameras, config)
+    for cam in cameras:
+        assert (cam.width_px, cam.height_px) == size
+        assert np.all(_inside_image(cam, _area_box(config)))
+
+
+@pytest.mark.parametrize(("pitch_range", "height_range"), [((50.0, 70.0), (7.0, 14.0)), ((0.0, 3.0), (0.7, 1.7))])
+def test_drawn_camera_tilts_are_exact_and_the_area_fits(pitch_range, height_range):
+    for size in ((1920, 1080), (1080, 1920)):
+        config = SceneConfig(num_views=6, camera_pitch_range_deg=pitch_range, image_size_px=size)
+        cameras = make_rig(config, np.random.default_rng(7))
+        _check_rig(cameras, config)
+        for cam in cameras:
+            assert pitch_range[0] - 1e-9 <= _pitch_deg(cam) <= pitch_range[1] + 1e-9
+            assert height_range[0] <= cam.center_world_m[2] <= height_range[1]
+            assert np.all(_inside_image(cam, _area_box(config, top_m=2.0)))
+
+
+def test_height_drawn_rigs_look_down_from_high_and_level_from_low():
+    high = make_rig(SceneConfig(num_views=8, camera_height_range_m=(7.0, 9.0)), np.random.default_rng(1))
+    low = make_rig(SceneConfig(num_views=8, camera_height_range_m=(1.0, 1.3)), np.random.default_rng(1))
+    assert min(_pitch_deg(c) for c in high) > 30.0
+    assert max(abs(_pitch_deg(c)) for c in low) < 6.0
+    # The distance rule fits the area's width only: from 7-9 m a landscape view may lose the near edge of the
+    # floor (``camera_pitch_range_deg`` fits the whole box), but the middle of the area stays in every view.
+    middle = _area_box(SceneConfig(num_people=1, area_size_m=(2.5, 2.0)), top_m=1.8)
+    for cam in high + low:
+        assert np.all(_inside_image(cam, middle))
+    assert np.mean([_inside_image(cam, _area_box(SceneConfig(), top_m=0.0)).mean() for cam in high]) > 0.8
+
+
+def test_k1_is_drawn_only_when_asked_and_keeps_the_area_in_view():
+    plain = make_rig(SceneConfig(num_views=4), np.random.default_rng(3))
+    config = SceneConfig(num_views=4, distortion_k1_range=(-0.3, 0.2))
+    lensed = make_rig(config, np.random.default_rng(3))
+    k1 = np.array([c.distortion[0] for c in lensed])
+    assert np.all((k1 >= -0.3) & (k1 <= 0.2)) and np.all(k1 != 0.0)
+    assert all(not c.distortion[1:].any() for c in lensed)
+    assert all(not c.distortion.any() for c in plain)
+    # The draws before the lenses are the same: same azimuths and focal lengths.
+    np.testing.assert_allclose([c.K for c in lensed], [c.K for c in plain])
+    for cam in lensed:
+        assert np.all(_inside_image(cam, _area_box(config, top_m=0.0)))
