@@ -12,9 +12,9 @@ from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig, estimate_ex
 @pytest.mark.slow
 def test_a_short_capture_where_every_view_is_blind(body_model, caplog):
     """``tiny`` (2 people, 3 views, 20 frames) with the shipped lifter: no view has a single-view focal or a
-    usable linear one. From the other views' field of view alone the bundle adjustment ended at 31 % (view 0:
-    2333 px for 1072); the best of several starts, with the crop-frame poses turned again at the refined focal lengths, ends within
-    2 %."""
+    usable linear one. Started from the other views' field of view, with the lifted poses turned into camera
+    frames at the starting focal lengths only, the bundle adjustment ended at 31 % (view 0: 2333 px for 1072);
+    the best of several starts alone gave 5.6 %; turning the poses again at the refined focal lengths, 1.9 %."""
     from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
@@ -31,5 +31,6 @@ def test_a_short_capture_where_every_view_is_blind(body_model, caplog):
     err = camera_errors(result.cameras, list(scene.rig))
     assert np.all(err["focal_error_pct"] < 3.0), err["focal_error_pct"]
     assert np.all(err["angle_error_deg"] < 1.5), err["angle_error_deg"]
+    # the start chosen among several is at least as good as the other views' field of view alone
     single = estimate_extrinsics(d, lifted, intr, ExtrinsicsConfig(blind_start_fov_deg=()))
-    assert np.max(camera_errors(single.cameras, list(scene.rig))["focal_error_pct"]) > 20.0
+    assert np.max(err["focal_error_pct"]) <= np.max(camera_errors(single.cameras, list(scene.rig))["focal_error_pct"]) + 0.5
