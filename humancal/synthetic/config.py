@@ -194,7 +194,7 @@ class SceneConfig:
             and its downward tilt follows), or (min, max) angle of the optical axis below the horizon,
             degrees, within [0, 75]: each camera draws its tilt from it and stands on that line of sight
             from the aim point, at the distance where the capture area fits its image; its height follows
-            (e.g. about 7-9 m at 50-60 degrees for the default area and lenses).
+            (e.g. 7.5-13 m at 50-60 degrees for the default area and lenses, less with wider lenses).
         area_fill: fraction of the horizontal field of view the capture area spans (sets each camera's
             distance from its focal length), in [0.3, 1.2]; above 1 the area's edges leave the images. With
             ``camera_pitch_range_deg`` set: the fraction of the image half-width or half-height (whichever
