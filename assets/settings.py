@@ -117,6 +117,8 @@ class ExtrinsicsSettings(dg.Config):
     upright_threshold: float = library_field(_E, "upright_threshold")
     seed: int = library_field(_E, "seed")
     fov_range_deg: list[float] = library_field(_E, "fov_range_deg")
+    blind_start_fov_deg: list[float] = library_field(_E, "blind_start_fov_deg")
+    blind_start_iterations: int = library_field(_E, "blind_start_iterations")
 
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""

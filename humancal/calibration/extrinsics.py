@@ -364,6 +364,7 @@ def estimate_extrinsics(
     # with the initial focal lengths, and once more with the linear solution if it moved them noticeably
     f_frame = f0.copy()
     lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
+    attempts = []
     for attempt in range(2 if lifted.frame == "crop" else 1):
         clock = time.perf_counter()
         with _stage("rotations"):
@@ -381,14 +382,24 @@ def estimate_extrinsics(
         # clamp, not an estimate): they start from the other views' field of view, then a resection
         blind = blind_views(f, sol, undetermined, bounds, diag, config)
         f = np.where(blind, other_views_focal(f, blind, widths, f0, bounds), f)
+        attempts.append((int(sol.inlier.sum()), attempt, R, residual_deg, pairs, rows_a, rows_b, f, sol, roots,
+                         f_linear, blind, lifted_cam, f_frame))
         if lifted.frame != "crop" or np.max(np.abs(np.log(f / f_frame))) < 0.05 or attempt == 1:
             break
         f_frame = f.copy()
         lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
+    # the poses turned at the linear focal lengths are kept only if they match more pairs (with wrong rotations
+    # the linear focal lengths can be far off, and the poses turned at them worse than at the starting ones)
+    (_, attempt, R, residual_deg, pairs, rows_a, rows_b, f, sol, roots, f_linear, blind, lifted_cam,
+     f_frame) = max(attempts, key=lambda a: (a[0], a[1]))
+    if len(attempts) > 1:
+        logger.info("crop-frame poses turned at the %s focal lengths (%d vs %d consistent pairs)",
+                    "linear" if attempt else "starting", attempts[1][0], attempts[0][0])
     lifted_as_given, lifted = lifted, lifted_cam
 
     clock = time.perf_counter()
-    groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections))
+    groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections),
+                               pair_cost=sol.residual_m[sol.inlier])
     if len(groups) < 3:
         raise CalibrationError(f"only {len(groups)} people could be matched across views: cannot refine the cameras")
     groups = _pick_groups(groups, detections, config.max_groups, rng)

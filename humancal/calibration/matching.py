@@ -2,7 +2,11 @@
 
 Pairs that agree with the consensus rotation of their views and with the linear translation solve are
 joined by union-find within each frame. A group holding two detections of the same view is contradictory
-(two people merged through a wrong pair) and is dropped: precision matters more than recall for calibration.
+(two people merged through a wrong pair). Without pair costs it is dropped: precision matters more than recall
+for calibration. With pair costs (e.g. the linear solve's root distances) it is split instead: its pairs are
+joined again from the cheapest up, skipping any pair that would put two detections of one view together. That
+keeps the people of crowded, static scenes (seated people close together), where many wrong pairs pass the
+consistency tests and nearly every component holds a conflict.
 """
 
 from __future__ import annotations
@@ -21,20 +25,24 @@ def _find(parent: np.ndarray, i: int) -> int:
     return root
 
 
-def groups_from_pairs(rows_a: np.ndarray, rows_b: np.ndarray, view: np.ndarray, num_rows: int) -> list[np.ndarray]:
+def groups_from_pairs(rows_a: np.ndarray, rows_b: np.ndarray, view: np.ndarray, num_rows: int,
+                      pair_cost: np.ndarray | None = None) -> list[np.ndarray]:
     """Connected components of the pair graph, without view conflicts.
 
     Args:
         rows_a, rows_b: (M,) matched detection rows (pairs lie in one frame and in two different views).
         view: (num_rows,) view of every detection row.
         num_rows: number of detection rows D.
+        pair_cost: (M,) optional cost of every pair (lower: more certainly one person); components with a view
+            conflict are then split (see the module docstring) instead of dropped.
 
     Returns:
         Groups as arrays of detection rows (at least two views each, at most one detection per view), sorted by
         their first row.
     """
+    rows_a, rows_b = np.asarray(rows_a, dtype=np.int64), np.asarray(rows_b, dtype=np.int64)
     parent = np.arange(num_rows)
-    for a, b in zip(np.asarray(rows_a).tolist(), np.asarray(rows_b).tolist()):
+    for a, b in zip(rows_a.tolist(), rows_b.tolist()):
         ra, rb = _find(parent, a), _find(parent, b)
         if ra != rb:
             parent[max(ra, rb)] = min(ra, rb)
@@ -43,9 +51,49 @@ def groups_from_pairs(rows_a: np.ndarray, rows_b: np.ndarray, view: np.ndarray, 
     order = np.argsort(roots, kind="stable")
     members, roots = members[order], roots[order]
     splits = np.flatnonzero(np.diff(roots)) + 1
-    groups = []
+    groups, conflicted = [], []
     for g in np.split(members, splits):
         views = view[g]
         if len(g) >= 2 and len(np.unique(views)) == len(g):
             groups.append(g)
-    return groups
+        elif len(g) > 2:
+            conflicted.append(g)
+    if pair_cost is not None and conflicted:
+        groups += _split_conflicts(rows_a, rows_b, np.asarray(pair_cost, dtype=np.float64), view, conflicted)
+    return sorted(groups, key=lambda g: int(g[0]))
+
+
+def _split_conflicts(rows_a, rows_b, cost, view, conflicted) -> list[np.ndarray]:
+    """Join the pairs inside conflicted components again, cheapest first, never two detections of one view."""
+    inside = np.zeros(len(view), bool)
+    inside[np.concatenate(conflicted)] = True
+    keep = np.flatnonzero(inside[rows_a] & np.isfinite(cost))
+    keep = keep[np.argsort(cost[keep], kind="stable")]
+    parent = {}
+    views_of = {}  # root -> bit mask of the views in its component
+
+    def find(i):
+        parent.setdefault(i, i)
+        views_of.setdefault(i, 1 << int(view[i]))
+        return _find_dict(parent, i)
+
+    for a, b in zip(rows_a[keep].tolist(), rows_b[keep].tolist()):
+        ra, rb = find(a), find(b)
+        if ra == rb or views_of[ra] & views_of[rb]:
+            continue
+        low, high = min(ra, rb), max(ra, rb)
+        parent[high] = low
+        views_of[low] |= views_of.pop(high)
+    components: dict[int, list[int]] = {}
+    for i in parent:
+        components.setdefault(_find_dict(parent, i), []).append(i)
+    return [np.array(sorted(c), dtype=np.int64) for c in components.values() if len(c) >= 2]
+
+
+def _find_dict(parent: dict, i: int) -> int:
+    root = i
+    while parent[root] != root:
+        root = parent[root]
+    while parent[i] != root:
+        parent[i], i = root, parent[i]
+    return root

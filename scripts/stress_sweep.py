@@ -1,0 +1,340 @@
+"""Stress sweep of the camera initialisation: seeded synthetic scenes drawn wide, with learned lifters of several
+training seeds; failures reported by kind, errors by scene kind.
+
+Each scene ``i`` draws (from ``numpy.random.default_rng([seed, i])``):
+
+* behaviour: ``mixed`` (people walk, stand, turn, gesture, sometimes crouch) for half the scenes, ``seated``
+  (everyone sits all along) and ``low`` (mostly sitting, crouching, bending) for a quarter each;
+* 2-6 people; 2-31 views (2: 10 %, 3-8: 55 %, 9-20: 20 %, 21-31: 15 %) on a ring (an arc for one in four);
+* 20-300 frames (log-uniform); a focal range inside 500-2500 px;
+* images landscape (1920x1080, 1280x720) or, one scene in four, portrait (1080x1920, 720x1280);
+* cameras: ordinary (1.5-4 m high, looking at the area centre), steeply down (45-70 degrees below the
+  horizon) or near the horizon (0-5 degrees);
+* one scene in three with radial lens distortion, k1 drawn per camera in [-0.15, 0.05] (the calibration
+  assumes a pinhole: this measures what an uncorrected lens costs).
+
+Scene ``i`` is lifted with lifter ``(i // 4) % L`` of the ``L`` given (``--lifters``), so every behaviour meets
+every lifter. The lifted poses come from the 2D detections only; the ground truth is used for the errors alone.
+
+Outcome of each scene, by kind: ``ok``; ``calibration_error`` (a :class:`~humancal.calibration.CalibrationError`,
+the stage in its message: a labelled refusal); ``crash`` (any other exception: a bug). Labels a calibrated scene
+can carry: views whose focal is ``poorly_constrained``, ``world_frame`` ``camera_0`` (no floor found), failed
+checks of :mod:`humancal.validation` (``cameras_valid``, ``focal_plausible``, ``rig_geometry``). An
+**unlabelled failure** is a view whose focal error exceeds 10 % or whose angle error exceeds 5 deg although its
+focal is ``ok`` and its scene failed no check: the thing this sweep exists to rule out.
+
+Every scene's result is written to ``OUT/scenes/`` as it finishes: a killed sweep resumes where it stopped.
+``OUT/summary.md`` and ``OUT/summary.json`` hold the distributions, ``OUT/views.csv`` every view,
+``OUT/focal_error_cdf.png`` the error distributions by behaviour.
+
+    python scripts/stress_sweep.py --scenes 102 --lifters shipped,seed1.pt,seed2.pt --out /tmp/stress --jobs 2
+"""
+
+from __future__ import annotations
+
+import os
+
+# many small matrices: multi-threaded BLAS only adds overhead (and the sweep runs scenes in parallel)
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import logging  # noqa: E402
+import multiprocessing  # noqa: E402
+import time  # noqa: E402
+import traceback  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+BEHAVIOURS = ("mixed", "mixed", "seated", "low")
+"""Scene ``i`` has behaviour ``BEHAVIOURS[i % 4]``."""
+UNLABELLED_FOCAL_PCT, UNLABELLED_ANGLE_DEG = 10.0, 5.0
+"""A view worse than this, with nothing saying so, is an unlabelled failure."""
+
+
+def scene_config(index: int, seed: int):
+    """The ``index``-th scene configuration and its description (a dict of the drawn factors)."""
+    from humancal.synthetic import preset
+
+    rng = np.random.default_rng([seed, index])
+    behaviour = BEHAVIOURS[index % 4]
+    views = int(rng.choice([2, int(rng.integers(3, 9)), int(rng.integers(9, 21)), int(rng.integers(21, 32))],
+                           p=[0.1, 0.55, 0.2, 0.15]))
+    frames = int(round(np.exp(rng.uniform(np.log(20), np.log(300)))))
+    people = int(rng.integers(2, 7))
+    lo = float(rng.uniform(500, 2000))
+    hi = float(min(lo + rng.uniform(100, 600), 2500))
+    portrait = bool(rng.random() < 0.25)
+    size = [(1920, 1080), (1280, 720)][int(rng.integers(2))]
+    size = size[::-1] if portrait else size
+    height_kind = str(rng.choice(["ordinary", "steep", "horizon"], p=[0.5, 0.25, 0.25]))
+    pitch = {"ordinary": None, "steep": (45.0, 70.0), "horizon": (0.0, 5.0)}[height_kind]
+    k1 = (-0.15, 0.05) if rng.random() < 1 / 3 else (0.0, 0.0)
+    rig = "arc" if rng.random() < 0.25 else "ring"
+    config = preset("demo", seed=int(seed * 100_000 + index), num_people=people, num_views=views, num_frames=frames,
+                    focal_range_px=(lo, hi), image_size_px=size, camera_pitch_range_deg=pitch, rig=rig,
+                    behaviour=behaviour, distortion_k1_range=k1)
+    described = {"behaviour": behaviour, "people": people, "views": views, "frames": frames, "rig": rig,
+                 "image": f"{size[0]}x{size[1]}", "portrait": portrait, "cameras": height_kind,
+                 "distortion": k1 != (0.0, 0.0)}
+    return config, described
+
+
+_WORKER: dict = {}
+
+
+def _init_worker(lifter_specs: list[str]) -> None:
+    import torch
+
+    from humancal.body import BodyModel
+    from humancal.lifter import load_lifter, shipped_checkpoint
+
+    torch.set_num_threads(1)
+    logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
+    _WORKER["body"] = BodyModel()
+    lifters = []
+    for spec in lifter_specs:
+        checkpoint = shipped_checkpoint() if spec == "shipped" else torch.load(spec, map_location="cpu",
+                                                                                weights_only=True)
+        lifters.append((int(checkpoint["config"]["seed"]), load_lifter(checkpoint)))
+    _WORKER["lifters"] = lifters
+
+
+def _checks(cameras, people_m, floor_known: bool) -> list[str]:
+    from humancal.camera import cameras_to_table
+    from humancal.validation import check_cameras_valid, check_focal_plausible, check_rig_geometry
+
+    table = cameras_to_table(cameras, "sweep")
+    reports = {"cameras_valid": check_cameras_valid(table), "focal_plausible": check_focal_plausible(table),
+               "rig_geometry": check_rig_geometry(table, people_m, floor_known=floor_known)}
+    return [name for name, report in reports.items() if not report.passed]
+
+
+def run_scene(index: int, seed: int) -> dict:
+    """Generate, lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}."""
+    from evaluation.camera_metrics import camera_errors
+    from humancal.calibration import CalibrationError, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
+    from humancal.detections import detections_to_dense
+    from humancal.lifter import lift_detections
+    from humancal.synthetic import generate_scene
+    from humancal.synthetic.activities import ACTIVITIES
+
+    config, scene_row = scene_config(index, seed)
+    lifter_seed, lifter = _WORKER["lifters"][(index // 4) % len(_WORKER["lifters"])]
+    scene_row.update(scene=index, lifter_seed=lifter_seed)
+    clock = time.perf_counter()
+    scene = generate_scene(config, _WORKER["body"], sequence=f"stress_{index}")
+    on_feet = np.isin(scene.activity, [ACTIVITIES.index(k) for k in ("walk", "turn", "stand", "gesture")])
+    scene_row.update(generate_s=time.perf_counter() - clock, on_feet_fraction=float(on_feet.mean()),
+                     detections=int(len(scene.detections)))
+    clock = time.perf_counter()
+    dense = detections_to_dense(scene.detections)
+    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
+    scene_row["lift_s"] = time.perf_counter() - clock
+    sizes = [(c.width_px, c.height_px) for c in scene.rig]
+    clock = time.perf_counter()
+    try:
+        intrinsics = estimate_intrinsics(dense, lifted, sizes, IntrinsicsConfig(missing_upright="defer"))
+        result = estimate_extrinsics(dense, lifted, intrinsics)
+    except CalibrationError as error:
+        scene_row.update(outcome="calibration_error", message=str(error), calibrate_s=time.perf_counter() - clock)
+        return {"scene": scene_row, "views": []}
+    except Exception as error:  # noqa: BLE001 - a crash is what the sweep counts, with its traceback
+        scene_row.update(outcome="crash", message=f"{type(error).__name__}: {error}",
+                         traceback=traceback.format_exc(), calibrate_s=time.perf_counter() - clock)
+        return {"scene": scene_row, "views": []}
+    scene_row["calibrate_s"] = time.perf_counter() - clock
+    diag = result.diagnostics
+    floor_known = diag.floor is not None
+    people = diag.floor.floor_points_m if floor_known else diag.people_world_m
+    errors = camera_errors(result.cameras, list(scene.rig))
+    up_error = float("nan")
+    if floor_known:  # the estimated world's up axis, in the true world, against the true up
+        up_error = float(np.degrees(np.arccos(np.clip((errors["alignment"].R @ [0.0, 0.0, 1.0])[2], -1.0, 1.0))))
+    failed = _checks(result.cameras, people, floor_known)
+    per_view = diag.per_view
+    scene_row.update(
+        outcome="ok", world_frame=diag.world_frame, floor_problem=diag.floor_problem,
+        up_source=diag.floor.up_source if floor_known else "none", up_error_deg=up_error,
+        failed_checks=",".join(failed), poorly_constrained=int((per_view["focal_status"] != "ok").sum()),
+        scale_error_pct=float(100.0 * (1.0 / errors["alignment"].scale - 1.0)),
+        extrinsics_timings_s=json.dumps({k: round(v, 2) for k, v in diag.timings_s.items()}),
+    )
+    views = []
+    for v, truth in enumerate(scene.rig):
+        focal_ok = per_view["focal_status"].iloc[v] == "ok"
+        bad = (errors["focal_error_pct"][v] > UNLABELLED_FOCAL_PCT) or (errors["angle_error_deg"][v] > UNLABELLED_ANGLE_DEG)
+        views.append({
+            "scene": index, "view": v, "focal_gt_px": float(truth.K[0, 0]),
+            "k1": float(truth.distortion[0]),
+            "pitch_down_deg": float(np.degrees(np.arcsin(np.clip(-truth.R_cam_from_world[2, 2], -1, 1)))),
+            "focal_error_pct": float(errors["focal_error_pct"][v]),
+            "angle_error_deg": float(errors["angle_error_deg"][v]),
+            "position_error_mm": float(errors["position_error_mm"][v]),
+            "focal_status": per_view["focal_status"].iloc[v], "bundle_status": per_view["bundle_status"].iloc[v],
+            "focal_source": per_view["focal_source"].iloc[v],
+            "unlabelled_failure": bool(bad and focal_ok and not failed),
+        })
+    return {"scene": scene_row, "views": views}
+
+
+def _run_and_store(job: tuple[int, int, str]) -> tuple[int, str]:
+    index, seed, folder = job
+    result = run_scene(index, seed)
+    path = Path(folder) / f"scene_{index:04d}.json"
+    partial = path.with_suffix(".partial")
+    partial.write_text(json.dumps(result, default=float))
+    os.replace(partial, path)
+    row = result["scene"]
+    return index, (f"scene {index:3d} {row['behaviour']:6s} {row['views']:2d} views {row['frames']:3d} frames "
+                   f"{row['image']:9s} {row['cameras']:8s} lifter {row['lifter_seed']}: {row['outcome']}"
+                   + (f", focal median {np.median([v['focal_error_pct'] for v in result['views']]):.2f} %"
+                      if result["views"] else f" ({row.get('message', '')[:120]})")
+                   + f" ({row.get('calibrate_s', 0):.1f} s)")
+
+
+def _quantiles(values: pd.Series) -> dict:
+    values = values.dropna()
+    if values.empty:
+        return {"n": 0}
+    return {"n": int(len(values)), "median": float(values.median()), "p90": float(values.quantile(0.9)),
+            "max": float(values.max())}
+
+
+def summarise(scenes: pd.DataFrame, views: pd.DataFrame) -> dict:
+    """Failures by kind, labels, and the error distributions by behaviour, lifter seed and scene factor."""
+    out = {"scenes": int(len(scenes)), "views": int(len(views)),
+           "outcomes": scenes["outcome"].value_counts().to_dict()}
+    if "message" in scenes:
+        failed = scenes[scenes["outcome"] != "ok"]
+        out["failures"] = [{"scene": int(r.scene), "outcome": r.outcome, "behaviour": r.behaviour,
+                            "views": int(r.views), "frames": int(r.frames), "message": r.message}
+                           for r in failed.itertuples()]
+    ok = scenes[scenes["outcome"] == "ok"]
+    if len(ok):
+        out["labels"] = {
+            "world_frame_camera_0": int((ok["world_frame"] == "camera_0").sum()),
+            "scenes_with_poorly_constrained_views": int((ok["poorly_constrained"] > 0).sum()),
+            "scenes_with_failed_checks": int((ok["failed_checks"].fillna("") != "").sum()),
+            "up_source": ok["up_source"].value_counts().to_dict(),
+        }
+    if len(views):
+        out["unlabelled_failures"] = int(views["unlabelled_failure"].sum())
+        merged = views.merge(scenes, on="scene", suffixes=("", "_scene"))
+        metrics = ("focal_error_pct", "angle_error_deg", "position_error_mm")
+        out["all"] = {m: _quantiles(merged[m]) for m in metrics}
+        for factor in ("behaviour", "lifter_seed", "cameras", "portrait", "distortion", "rig"):
+            out[f"by_{factor}"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+                                   for key, group in merged.groupby(factor)}
+        bins = pd.cut(merged["views"], [1, 2, 8, 20, 31], labels=["2", "3-8", "9-20", "21-31"])
+        out["by_views"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+                           for key, group in merged.groupby(bins, observed=True)}
+        frames = pd.cut(merged["frames"], [0, 50, 120, 300], labels=["20-50", "51-120", "121-300"])
+        out["by_frames"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+                            for key, group in merged.groupby(frames, observed=True)}
+        out["up_error_deg"] = {str(key): _quantiles(group["up_error_deg"]) for key, group in ok.groupby("behaviour")}
+        many = ok[ok["views"] >= 21]
+        out["calibrate_s"] = {"median": float(ok["calibrate_s"].median()), "max": float(ok["calibrate_s"].max()),
+                              "views_21_31_median": float(many["calibrate_s"].median()) if len(many) else None,
+                              "views_31": ok[ok["views"] == 31]["calibrate_s"].round(1).tolist()}
+    return out
+
+
+def _markdown(summary: dict) -> str:
+    lines = [f"# Stress sweep: {summary['scenes']} scenes, {summary['views']} views", "",
+             f"Outcomes: {summary['outcomes']}; unlabelled failures: {summary.get('unlabelled_failures', 0)} views", ""]
+    if summary.get("labels"):
+        lines += [f"Labels: {summary['labels']}", ""]
+    for factor in ("behaviour", "lifter_seed", "views", "frames", "cameras", "portrait", "distortion", "rig"):
+        table = summary.get(f"by_{factor}")
+        if not table:
+            continue
+        lines += [f"## by {factor}", "", "| " + factor + " | views | focal median % | focal p90 % | angle median deg "
+                  "| angle p90 deg | position median mm |", "|---|---|---|---|---|---|---|"]
+        for key, m in table.items():
+            f, a, p = m["focal_error_pct"], m["angle_error_deg"], m["position_error_mm"]
+            lines.append(f"| {key} | {f['n']} | {f['median']:.2f} | {f['p90']:.2f} | {a['median']:.2f} | "
+                         f"{a['p90']:.2f} | {p['median']:.0f} |")
+        lines.append("")
+    for failure in summary.get("failures", []):
+        lines.append(f"- scene {failure['scene']} ({failure['behaviour']}, {failure['views']} views, "
+                     f"{failure['frames']} frames): {failure['outcome']}: {failure['message']}")
+    return "\n".join(lines) + "\n"
+
+
+def _plot(views: pd.DataFrame, scenes: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    merged = views.merge(scenes[["scene", "behaviour"]], on="scene")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for behaviour, group in merged.groupby("behaviour"):
+        for ax, metric in zip(axes, ("focal_error_pct", "angle_error_deg")):
+            values = np.sort(group[metric].to_numpy())
+            ax.plot(np.maximum(values, 1e-3), np.arange(1, len(values) + 1) / len(values), label=f"{behaviour} "
+                    f"({len(values)} views)")
+    for ax, label in zip(axes, ("focal error (%)", "angle error (deg)")):
+        ax.set_xscale("log")
+        ax.set_xlabel(label)
+        ax.set_ylabel("fraction of views")
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+    fig.suptitle("Camera initialisation, stress sweep: error distribution by behaviour")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", type=int, default=102)
+    parser.add_argument("--seed", type=int, default=0, help="sweep seed")
+    parser.add_argument("--lifters", default="shipped",
+                        help="comma-separated lifter checkpoints ('shipped' for the packaged weights)")
+    parser.add_argument("--out", type=Path, required=True, help="folder for the per-scene results and summaries")
+    parser.add_argument("--jobs", type=int, default=1, help="scenes calibrated in parallel (one process each)")
+    parser.add_argument("--only", default=None, help="comma-separated scene indices (debugging)")
+    args = parser.parse_args()
+    specs = [s.strip() for s in args.lifters.split(",") if s.strip()]
+    for spec in specs:
+        if spec != "shipped" and not Path(spec).is_file():
+            parser.error(f"--lifters: {spec} is not a file (nor 'shipped')")
+    folder = args.out / "scenes"
+    folder.mkdir(parents=True, exist_ok=True)
+    indices = [int(i) for i in args.only.split(",")] if args.only else list(range(args.scenes))
+    todo = [i for i in indices if not (folder / f"scene_{i:04d}.json").exists()]
+    print(f"{len(indices) - len(todo)} scenes already done in {folder}; {len(todo)} to run", flush=True)
+    start = time.perf_counter()
+    if todo:
+        jobs = [(i, args.seed, str(folder)) for i in todo]
+        if args.jobs > 1:
+            with multiprocessing.get_context("spawn").Pool(args.jobs, _init_worker, (specs,)) as pool:
+                for done, (_, line) in enumerate(pool.imap_unordered(_run_and_store, jobs), 1):
+                    print(f"[{done}/{len(todo)} {time.perf_counter() - start:.0f} s] {line}", flush=True)
+        else:
+            _init_worker(specs)
+            for done, job in enumerate(jobs, 1):
+                print(f"[{done}/{len(todo)} {time.perf_counter() - start:.0f} s] {_run_and_store(job)[1]}", flush=True)
+    results = [json.loads((folder / f"scene_{i:04d}.json").read_text()) for i in indices]
+    scenes = pd.DataFrame([r["scene"] for r in results])
+    views = pd.DataFrame([v for r in results for v in r["views"]])
+    summary = summarise(scenes, views)
+    scenes.drop(columns=["traceback"], errors="ignore").to_csv(args.out / "scenes.csv", index=False)
+    views.to_csv(args.out / "views.csv", index=False)
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+    (args.out / "summary.md").write_text(_markdown(summary))
+    if len(views):
+        _plot(views, scenes, args.out / "focal_error_cdf.png")
+    print(_markdown(summary))
+    for r in results:
+        if r["scene"].get("traceback"):
+            print(f"scene {r['scene']['scene']} crashed:\n{r['scene']['traceback']}")
+
+
+if __name__ == "__main__":
+    main()
