@@ -393,8 +393,8 @@ def estimate_extrinsics(
     (_, attempt, R, residual_deg, pairs, rows_a, rows_b, f, sol, roots, f_linear, blind, lifted_cam,
      f_frame) = max(attempts, key=lambda a: (a[0], a[1]))
     if len(attempts) > 1:
-        logger.info("crop-frame poses turned at the %s focal lengths (%d vs %d consistent pairs)",
-                    "linear" if attempt else "starting", attempts[1][0], attempts[0][0])
+        logger.info("crop-frame poses turned at the %s focal lengths (consistent pairs: %d at the starting ones, "
+                    "%d at the linear ones)", "linear" if attempt else "starting", attempts[0][0], attempts[1][0])
     lifted_as_given, lifted = lifted, lifted_cam
 
     clock = time.perf_counter()
