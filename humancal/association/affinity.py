@@ -377,6 +377,8 @@ class PairAffinities:
         common_joints: (P,) joints both detections see.
         combined: (P,) the combined affinity in [0, 1] without temporal term.
         config: the settings used.
+        geometry: the detections' rays and world poses (for :func:`detection_track_affinity`; no poses when
+            the pose terms are off).
     """
 
     frame: np.ndarray
@@ -390,6 +392,7 @@ class PairAffinities:
     common_joints: np.ndarray
     combined: np.ndarray
     config: AffinityConfig
+    geometry: DetectionGeometry
 
     def frame_rows(self, frame: int) -> np.ndarray:
         """(n,) detection rows of one frame (empty for a frame without detections)."""
@@ -513,7 +516,7 @@ def pair_affinities(
     frame_start = np.append(start, len(geo)).astype(np.int64)
     logger.debug("affinity: %d detections, %d frames, %d cross-view pairs", len(geo), len(frames), P)
     return PairAffinities(geo.frame, geo.view, frames, frame_start, a, b, geometric, pose, common,
-                          combine_affinity(geometric, pose, common, config), config)
+                          combine_affinity(geometric, pose, common, config), config, geo)
 
 
 def detection_track_affinity(

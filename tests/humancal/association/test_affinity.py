@@ -109,7 +109,7 @@ def test_track_affinity_picks_the_right_person(scene_inputs):
 def test_temporal_term_in_the_frame_matrix(scene_inputs):
     dense, lifted, rig, person, keypoints = scene_inputs
     pairs = pair_affinities(dense, lifted, rig)
-    geometry = detection_geometry(dense, lifted, rig)
+    geometry = pairs.geometry
     labels, plain, with_tracks = [], [], []
     for frame in pairs.frames[1:]:
         rows = pairs.frame_rows(frame)
