@@ -373,9 +373,9 @@ def resect_focal_translation(
     for _ in range(iterations):
         sw = np.repeat(np.sqrt(w), 2)
         sol = np.linalg.lstsq(A * sw[:, None], b * sw, rcond=None)[0]
-        f, t = sol[0], np.array([sol[1] / sol[0], sol[2] / sol[0], sol[3]])
-        P = RX + t
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore"):  # a zero focal is refused after the loop
+            f, t = sol[0], np.array([sol[1] / sol[0], sol[2] / sol[0], sol[3]])
+            P = RX + t
             res = np.linalg.norm(f * P[:, :2] / P[:, 2:3] - x, axis=1)
         res = np.where(P[:, 2] > 0, res, np.inf)
         # algebraic rows are pixel errors times the depth: divide it out, then Huber
