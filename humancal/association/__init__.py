@@ -11,6 +11,18 @@ from humancal.association.affinity import (
     pair_affinities,
     rigid_residual_rms_m,
 )
+from humancal.association.cycle_matching import (
+    FrameMatching,
+    MatchingConfig,
+    WarmStart,
+    carry_over,
+    clusters_to_matrix,
+    match_frame,
+    match_frames,
+    relaxation_objective,
+    round_to_clusters,
+    solve_relaxation_cvxpy,
+)
 
 __all__ = [
     "AffinityConfig",
@@ -22,4 +34,14 @@ __all__ = [
     "detection_track_affinity",
     "pair_affinities",
     "rigid_residual_rms_m",
+    "FrameMatching",
+    "MatchingConfig",
+    "WarmStart",
+    "carry_over",
+    "clusters_to_matrix",
+    "match_frame",
+    "match_frames",
+    "relaxation_objective",
+    "round_to_clusters",
+    "solve_relaxation_cvxpy",
 ]
