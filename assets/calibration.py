@@ -22,7 +22,13 @@ from humancal.calibration import (
 from humancal.camera import cameras_to_table
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
-from humancal.validation import CheckReport, check_cameras_valid, check_focal_plausible, check_rig_geometry
+from humancal.validation import (
+    CheckReport,
+    check_body_size,
+    check_cameras_valid,
+    check_focal_plausible,
+    check_rig_geometry,
+)
 from resources.torch import TorchResource
 
 MIN_UPRIGHT_PER_VIEW = 20
@@ -144,6 +150,8 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
                           description="cameras above the floor, each with most people in front and in its image"),
         dg.AssetCheckSpec("focal_constrained", asset="extrinsics",
                           description="every focal determined to 5 % (relative std of the bundle adjustment; warns)"),
+        dg.AssetCheckSpec("people_plausible", asset="extrinsics", blocking=True,
+                          description="the people triangulated with these cameras have their lifted size (0.8-1.25)"),
         dg.AssetCheckSpec("floor_found", asset="extrinsics",
                           description="the people gave an up direction and a floor (else the cameras are in camera "
                                       "0's frame; warns)"),
@@ -183,10 +191,12 @@ def extrinsics(
         world_frame=result.diagnostics.world_frame,
         up_source=floor.up_source if floor is not None else "none",
         up_std_deg=float(floor.up_std_deg) if floor is not None else float("nan"),
+        body_size_ratio=float(result.diagnostics.body_size_ratio),
     )
     rig = check_rig_geometry(table, people, floor_known=floor is not None)
     for name, report in (("cameras_valid", check_cameras_valid(table)), ("focal_plausible", check_focal_plausible(table)),
-                         ("rig_geometry", rig)):
+                         ("rig_geometry", rig),
+                         ("people_plausible", check_body_size(result.diagnostics.body_size_ratio))):
         yield check_result(context, name, report)
     yield check_result(context, "focal_constrained", _focal_constrained_report(per_view),
                        severity=dg.AssetCheckSeverity.WARN)

@@ -21,6 +21,7 @@ __all__ = [
     "check_cameras_valid",
     "check_focal_plausible",
     "check_rig_geometry",
+    "check_body_size",
 ]
 
 
@@ -197,3 +198,24 @@ def check_rig_geometry(cameras: pd.DataFrame, people_floor_m: np.ndarray, min_in
     where = "above the floor" if floor_known else "(no floor found: heights not checked)"
     return CheckReport(True, f"{len(heights)} cameras {where}, each seeing most of the people", figures,
                        checked=len(heights))
+
+
+def check_body_size(body_size_ratio: float, allowed: tuple[float, float] = (0.8, 1.25)) -> CheckReport:
+    """The people triangulated with the calibrated cameras have the size the lifter gives them.
+
+    ``body_size_ratio`` is :attr:`humancal.calibration.ExtrinsicsDiagnostics.body_size_ratio` (triangulated over
+    lifted limb lengths, median over the matched people). A consistent rig gives about 1 (the bundle adjustment
+    takes the metric scale from the lifted sizes); outside ``allowed`` the cameras and the people disagree, which
+    a low reprojection error does not rule out (a rig six times too large fitted the detections of a synthetic
+    scene to 1.5 px). NaN (no matched limb): not checked.
+    """
+    figures = {"body_size_ratio": float(body_size_ratio)}
+    if not np.isfinite(body_size_ratio):
+        return CheckReport.nothing_to_check("no matched person with measurable limbs", figures)
+    low, high = allowed
+    if not low <= body_size_ratio <= high:
+        return CheckReport(False, f"the people triangulated with these cameras are {body_size_ratio:.2f} times the "
+                                  f"size the lifter gives them (allowed {low}-{high}): the cameras are wrong",
+                           figures, checked=1)
+    return CheckReport(True, f"the triangulated people are {body_size_ratio:.2f} times their lifted size", figures,
+                       checked=1)

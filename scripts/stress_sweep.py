@@ -19,7 +19,8 @@ every lifter. The lifted poses come from the 2D detections only; the ground trut
 Outcome of each scene, by kind: ``ok``; ``calibration_error`` (a :class:`~humancal.calibration.CalibrationError`,
 the stage in its message: a labelled refusal); ``crash`` (any other exception: a bug). Labels a calibrated scene
 can carry: views whose focal is ``poorly_constrained``, ``world_frame`` ``camera_0`` (no floor found), failed
-checks of :mod:`humancal.validation` (``cameras_valid``, ``focal_plausible``, ``rig_geometry``). An
+checks of :mod:`humancal.validation` (``cameras_valid``, ``focal_plausible``, ``rig_geometry``,
+``people_plausible``), the blocking checks of the pipeline's ``extrinsics`` asset. An
 **unlabelled failure** is a view whose focal error exceeds 10 % or whose angle error exceeds 5 deg although its
 focal is ``ok`` and its scene failed no check: the thing this sweep exists to rule out.
 
@@ -103,13 +104,14 @@ def _init_worker(lifter_specs: list[str]) -> None:
     _WORKER["lifters"] = lifters
 
 
-def _checks(cameras, people_m, floor_known: bool) -> list[str]:
+def _checks(cameras, people_m, floor_known: bool, body_size_ratio: float) -> list[str]:
     from humancal.camera import cameras_to_table
-    from humancal.validation import check_cameras_valid, check_focal_plausible, check_rig_geometry
+    from humancal.validation import check_body_size, check_cameras_valid, check_focal_plausible, check_rig_geometry
 
     table = cameras_to_table(cameras, "sweep")
     reports = {"cameras_valid": check_cameras_valid(table), "focal_plausible": check_focal_plausible(table),
-               "rig_geometry": check_rig_geometry(table, people_m, floor_known=floor_known)}
+               "rig_geometry": check_rig_geometry(table, people_m, floor_known=floor_known),
+               "people_plausible": check_body_size(body_size_ratio)}
     return [name for name, report in reports.items() if not report.passed]
 
 
@@ -154,13 +156,14 @@ def run_scene(index: int, seed: int) -> dict:
     up_error = float("nan")
     if floor_known:  # the estimated world's up axis, in the true world, against the true up
         up_error = float(np.degrees(np.arccos(np.clip((errors["alignment"].R @ [0.0, 0.0, 1.0])[2], -1.0, 1.0))))
-    failed = _checks(result.cameras, people, floor_known)
+    failed = _checks(result.cameras, people, floor_known, diag.body_size_ratio)
     per_view = diag.per_view
     scene_row.update(
         outcome="ok", world_frame=diag.world_frame, floor_problem=diag.floor_problem,
         up_source=diag.floor.up_source if floor_known else "none", up_error_deg=up_error,
         failed_checks=",".join(failed), poorly_constrained=int((per_view["focal_status"] != "ok").sum()),
         scale_error_pct=float(100.0 * (1.0 / errors["alignment"].scale - 1.0)),
+        body_size_ratio=float(diag.body_size_ratio),
         extrinsics_timings_s=json.dumps({k: round(v, 2) for k, v in diag.timings_s.items()}),
     )
     views = []
@@ -176,6 +179,8 @@ def run_scene(index: int, seed: int) -> dict:
             "position_error_mm": float(errors["position_error_mm"][v]),
             "focal_status": per_view["focal_status"].iloc[v], "bundle_status": per_view["bundle_status"].iloc[v],
             "focal_source": per_view["focal_source"].iloc[v],
+            "focal_rel_std": float(per_view["focal_rel_std"].iloc[v]),
+            "reprojection_rms_px": float(per_view["reprojection_rms_px"].iloc[v]),
             "unlabelled_failure": bool(bad and focal_ok and not failed),
         })
     return {"scene": scene_row, "views": views}

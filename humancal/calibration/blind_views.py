@@ -5,9 +5,13 @@ see them). Used by :func:`humancal.calibration.extrinsics.estimate_extrinsics`."
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from humancal.calibration.translations import resect_focal_translation
+
+logger = logging.getLogger(__name__)
 
 __all__ = ["blind_views", "other_views_focal", "resection_pass", "translations_from_others"]
 
@@ -16,7 +20,8 @@ def resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, bounds, vie
     """Re-estimate the focal and translation of ``views`` from the people placed by the other views.
 
     A resection is accepted only when its focal lies within the plausible ``bounds`` ((V, 2), pixels) and it and
-    the translation are finite (``accepted``); the other views keep ``f`` and ``t``.
+    the translation are finite (``accepted``); the other views keep ``f`` and ``t``, as does a view whose
+    resection fails numerically (a degenerate set of points).
 
     The linear solve sees a view's focal only through the spread of its people's depths, which vanishes for a
     camera looking straight down (all people at about the same depth) and is attenuated by depth noise;
@@ -41,7 +46,12 @@ def resection_pass(groups, detections, lifted, roots_T, R, t, f, pp, bounds, vie
             w.append(np.where(detections.scores[d] >= 0.3, detections.scores[d], 0.0))
         if len(X) < 3:
             continue
-        fv, tv, _ = resect_focal_translation(np.concatenate(X), np.concatenate(x), np.concatenate(w), R[v], pp[v])
+        try:
+            fv, tv, _ = resect_focal_translation(np.concatenate(X), np.concatenate(x), np.concatenate(w), R[v],
+                                                 pp[v])
+        except np.linalg.LinAlgError as error:  # a degenerate point set: this view is simply not resected
+            logger.info("view %d: resection failed (%s); it keeps its starting focal", v, error)
+            continue
         if np.isfinite(fv) and bounds[v, 0] <= fv <= bounds[v, 1] and np.isfinite(tv).all():
             f_new[v], t_new[v] = fv, tv
             accepted[v] = True

@@ -44,6 +44,7 @@ from humancal.calibration.types import CalibrationError, LiftedPoses, check_lift
 from humancal.calibration.view_graph import check_view_graph
 from humancal.camera import Camera
 from humancal.detections import DenseDetections
+from humancal.keypoints import JOINT_INDEX
 from humancal.lifter.pose_cues import standing_score
 
 __all__ = ["ExtrinsicsConfig", "ExtrinsicsDiagnostics", "ExtrinsicsEstimate", "estimate_extrinsics"]
@@ -150,6 +151,9 @@ class ExtrinsicsDiagnostics:
             (camera 0 at the origin looking along +z, OpenCV axes: ``align_floor`` off, or no floor found).
         floor_problem: why no floor was found (None when one was, or when not asked for).
         people_world_m: (G, 3) the matched groups' hip midpoints in the returned world frame, metres.
+        body_size_ratio: median over the groups of their triangulated limb lengths over their lifted ones (the
+            lifter sees body proportions and sizes the people): about 1 for a consistent rig; far from 1, the
+            cameras and the people disagree (a wrong solution, whatever its reprojection error).
         bundle_inlier_fraction: keypoints within the Huber threshold in the bundle adjustment.
         timings_s: seconds per step.
     """
@@ -163,6 +167,7 @@ class ExtrinsicsDiagnostics:
     world_frame: str = "floor"
     floor_problem: str | None = None
     people_world_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    body_size_ratio: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -298,6 +303,26 @@ def _best_start(adjust, f, t, points, unseen, diag, bounds, detections, lifted, 
     return best[1], best[2], best[3], best[4]
 
 
+_LIMBS = np.array([[JOINT_INDEX[a], JOINT_INDEX[b]] for a, b in (
+    ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("right_hip", "right_knee"), ("right_knee", "right_ankle"),
+    ("left_shoulder", "left_elbow"), ("left_elbow", "left_wrist"), ("right_shoulder", "right_elbow"),
+    ("right_elbow", "right_wrist"))])
+
+
+def _body_size_ratio(points_world_m, lifted, groups) -> float:
+    """Median over the groups of (sum of triangulated limb lengths) / (median over its detections of the same sum
+    in the lifted poses)."""
+    def limbs(joints):  # (..., 23, 3) -> (...,) summed limb lengths
+        return np.linalg.norm(joints[..., _LIMBS[:, 0], :] - joints[..., _LIMBS[:, 1], :], axis=-1).sum(-1)
+
+    triangulated = limbs(points_world_m)
+    lifted_size = np.array([np.nanmedian(limbs(lifted.joints_cam_m[g])) for g in groups])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = triangulated / lifted_size
+    ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
+    return float(np.median(ratio)) if len(ratio) else float("nan")
+
+
 def _pick_groups(groups, detections, max_groups, rng):
     if len(groups) <= max_groups:
         return groups
@@ -388,18 +413,23 @@ def estimate_extrinsics(
             break
         f_frame = f.copy()
         lifted_cam = lifted.in_camera_frame(_K(f_frame, f_frame, pp)[detections.view])
-    # the poses turned at the linear focal lengths are kept only if they match more pairs (with wrong rotations
+    # the poses turned at the linear focal lengths are kept unless they match far fewer pairs (with wrong rotations
     # the linear focal lengths can be far off, and the poses turned at them worse than at the starting ones)
+    chosen = attempts[-1] if attempts[-1][0] >= 0.5 * attempts[0][0] else attempts[0]
     (_, attempt, R, residual_deg, pairs, rows_a, rows_b, f, sol, roots, f_linear, blind, lifted_cam,
-     f_frame) = max(attempts, key=lambda a: (a[0], a[1]))
+     f_frame) = chosen
     if len(attempts) > 1:
         logger.info("crop-frame poses turned at the %s focal lengths (consistent pairs: %d at the starting ones, "
                     "%d at the linear ones)", "linear" if attempt else "starting", attempts[0][0], attempts[1][0])
     lifted_as_given, lifted = lifted, lifted_cam
 
     clock = time.perf_counter()
-    groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections),
-                               pair_cost=sol.residual_m[sol.inlier])
+    groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections))
+    if len(groups) < config.max_groups // 2:
+        # too few conflict-free people (crowded, static scenes: seated people close together let many wrong pairs
+        # through): split the conflicted components instead of dropping them
+        groups = groups_from_pairs(rows_a[sol.inlier], rows_b[sol.inlier], detections.view, len(detections),
+                                   pair_cost=sol.residual_m[sol.inlier])
     if len(groups) < 3:
         raise CalibrationError(f"only {len(groups)} people could be matched across views: cannot refine the cameras")
     groups = _pick_groups(groups, detections, config.max_groups, rng)
@@ -515,7 +545,8 @@ def estimate_extrinsics(
     })
     diagnostics = ExtrinsicsDiagnostics(per_view, pair_table, group_table, floor, ba.inlier_fraction, timings,
                                         world_frame="floor" if floor is not None else "camera_0",
-                                        floor_problem=floor_problem, people_world_m=people)
+                                        floor_problem=floor_problem, people_world_m=people,
+                                        body_size_ratio=_body_size_ratio(ba.points_world_m, lifted, groups))
     logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})

@@ -148,6 +148,7 @@ def align_to_floor(
     min_people: int = 3,
     max_torso_plane_deg: float = 30.0,
     min_torso_agreement: float = 0.7,
+    min_coarse_agreement: float = 0.3,
 ) -> FloorAlignment:
     """Find the floor and the new world frame (see the module docstring).
 
@@ -161,7 +162,10 @@ def align_to_floor(
         min_standing: with at least this many standing groups the floor comes from them alone.
         min_people: fewer groups than this give no floor.
         max_torso_plane_deg: a foot-contact plane whose normal is further from the torso axes is not the floor.
-        min_torso_agreement: torso axes whose mean resultant length is lower point every way: no up direction.
+        min_torso_agreement: the torso axes alone give the up direction only with at least this mean resultant
+            length (1: all parallel).
+        min_coarse_agreement: below this the torso axes point every way and cannot even orient the contact
+            plane: no up direction.
 
     Returns:
         :class:`FloorAlignment`.
@@ -176,9 +180,12 @@ def align_to_floor(
     if len(X) < min_people:
         raise NoFloorError(f"only {len(X)} people were matched across views (need {min_people}): no floor")
     torso, torso_std, agreement = _torso_up(X)
-    if not agreement >= min_torso_agreement:
-        raise NoFloorError(f"the people's torso axes point every way (mean resultant length {agreement:.2f}, need "
-                           f"{min_torso_agreement}) and only {int(standing.sum())} stand: no up direction")
+    refusal = (f"the people's torso axes point every way (mean resultant length {agreement:.2f}, need "
+               f"{min_torso_agreement}) and only {int(standing.sum())} stand")
+    if not agreement >= min_coarse_agreement:
+        raise NoFloorError(f"{refusal}: no up direction")
+    # the torso axes only pick each person's lowest sole point and the plane normal's sign here: bending people
+    # spread them (a lower resultant length) without spoiling the contact plane
     normal, spread, inliers, rms = _plane_fit(_lowest_soles(X, torso))
     normal = normal if normal @ torso > 0 else -normal
     angle = float(np.degrees(np.arccos(np.clip(normal @ torso, -1.0, 1.0))))
@@ -186,9 +193,12 @@ def align_to_floor(
         lowest = _lowest_soles(X, normal)[inliers]
         up, source = normal, "contact_plane"
         up_std = float(np.degrees(rms / (spread * np.sqrt(inliers.sum()))))
-    else:
+    elif agreement >= min_torso_agreement:
         lowest = _lowest_soles(X, torso)
         up, source, up_std = torso, "torso_axes", torso_std
+    else:
+        raise NoFloorError(f"{refusal}, and their foot contacts fit no floor plane (in-plane spread {spread:.2f} m, "
+                           f"{angle:.0f} deg from the torso axes): no up direction")
     heights = lowest @ up
     floor = float(np.median(heights))
     keep = np.abs(heights - floor) <= max(3.0 * 1.4826 * np.median(np.abs(heights - floor)), 0.02)

@@ -11,6 +11,7 @@ from humancal.validation import (
     check_detections_plausible,
     check_focal_plausible,
     check_rig_geometry,
+    check_body_size,
 )
 
 
@@ -121,3 +122,11 @@ def test_no_detections_at_all_fails():
     views = pd.DataFrame({"view": [0], "width_px": [640], "height_px": [480]})
     report = check_detections_plausible(empty_table("detections"), views)
     assert not report.passed and report.description == "no detections at all"
+
+
+def test_people_of_the_wrong_size_fail_the_body_size_check():
+    assert check_body_size(1.04).passed
+    report = check_body_size(6.1)
+    assert not report.passed and "6.10 times the size" in report.description
+    assert not check_body_size(0.6).passed
+    assert check_body_size(float("nan")).not_checked

@@ -69,6 +69,8 @@ def test_checks_pass_on_a_good_rig(materialized):
                 ("extrinsics", "focal_plausible"), ("extrinsics", "rig_geometry"), ("extrinsics", "focal_constrained")]:
         assert checks[key].passed, (key, checks[key].description)
         assert checks[key].metadata["checked"].value == 4, key
+    size = checks[("extrinsics", "people_plausible")]
+    assert size.passed and 0.8 < size.metadata["body_size_ratio"].value < 1.25, size.description
     floor = checks[("extrinsics", "floor_found")]
     assert floor.passed and "up from floor_plane" in floor.description, floor.description
 

@@ -48,7 +48,8 @@ def _calibration(partition: str):
     floor = SimpleNamespace(floor_points_m=PEOPLE, up_source="floor_plane", up_std_deg=0.1, contact_groups=3,
                             standing_groups=3, floor_rms_m=0.01)
     diagnostics = SimpleNamespace(floor=floor, per_view=per_view, bundle_inlier_fraction=1.0, world_frame="floor",
-                                  floor_problem=None, people_world_m=PEOPLE + [0.0, 0.0, 1.0])
+                                  floor_problem=None, people_world_m=PEOPLE + [0.0, 0.0, 1.0],
+                                  body_size_ratio=1.0)
     return SimpleNamespace(cameras=cameras, diagnostics=diagnostics)
 
 
@@ -117,7 +118,7 @@ def test_the_recorded_outcomes_are_those_of_the_latest_materialization(defs, ins
     below = {o.check: o for o in latest_check_outcomes(instance, dg.AssetKey("extrinsics"), BELOW)}
     loose = {o.check: o for o in latest_check_outcomes(instance, dg.AssetKey("extrinsics"), LOOSE)}
     assert set(below) == set(loose) == {"cameras_valid", "focal_plausible", "rig_geometry", "focal_constrained",
-                                        "floor_found"}
+                                        "floor_found", "people_plausible"}
     assert not below["rig_geometry"].passed and loose["rig_geometry"].passed
     assert below["rig_geometry"].blocking and not below["focal_constrained"].blocking
     assert latest_check_outcomes(instance, dg.AssetKey("metric_tables"), BELOW) is None
