@@ -23,6 +23,14 @@ from humancal.association.cycle_matching import (
     round_to_clusters,
     solve_relaxation_cvxpy,
 )
+from humancal.association.tracking import (
+    SKELETONS3D_SCHEMA,
+    AssociationResult,
+    TrackingConfig,
+    associate,
+    to_associations_table,
+    to_skeletons_table,
+)
 
 __all__ = [
     "AffinityConfig",
@@ -44,4 +52,10 @@ __all__ = [
     "relaxation_objective",
     "round_to_clusters",
     "solve_relaxation_cvxpy",
+    "SKELETONS3D_SCHEMA",
+    "AssociationResult",
+    "TrackingConfig",
+    "associate",
+    "to_associations_table",
+    "to_skeletons_table",
 ]

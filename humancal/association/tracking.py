@@ -1,0 +1,625 @@
+"""Tracking over time: who is who across views and frames, and the people's 3D skeletons (the paper's
+section III-C, ``docs/association.md``).
+
+:func:`associate` runs the whole association of a sequence:
+
+1. **Affinity** of every cross-view pair of every frame (:func:`~humancal.association.affinity.pair_affinities`).
+2. **Matching**, all frames in one batch, without the temporal term
+   (:func:`~humancal.association.cycle_matching.match_frames`): per frame, clusters of detections (one person,
+   at most one detection per view) and unmatched detections.
+3. **Triangulation** of every cluster, all at once (:func:`humancal.geometry.triangulation.triangulate_dlt`,
+   confidence weighted, dropping per joint the views that reproject too far: left-right flips).
+4. **Tracking**, frame by frame: clusters are assigned to tracks by the Hungarian method
+   (``scipy.optimize.linear_sum_assignment``) on the mean 3D joint distance to each track's predicted skeleton,
+   gated by ``assign_distance_m``. A track that is not seen waits ``reid_window_s`` seconds; a cluster assigned
+   to it after a gap (re-identification after an occlusion or after the person left the views) must also lie
+   within the distance the person may have walked meanwhile and have the track's bone lengths. A cluster that
+   matches no track starts one when it is seen by ``min_views`` views or more; a track observed for less than
+   ``min_track_s`` seconds is rejected (its detections become ``-1``).
+5. **Temporal term**: the affinities are scored again with each frame's detections against the tracks of the
+   previous frame (:meth:`~humancal.association.affinity.PairAffinities.matrix` with
+   :func:`~humancal.association.affinity.detection_track_affinity`); only the frames where this moves a pair
+   across the match threshold are matched again (one batch), triangulated again, and tracking runs again.
+6. **Number of people**: the tracks that survive, unless ``num_people`` is given; then at most that many ids
+   are kept: the shortest surplus track is merged into a longer one it never overlaps in time and whose bone
+   lengths it shares (the nearest at the junction), and dropped (its detections ``-1``) when no such track exists.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field, replace
+
+import cv2
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+from scipy.optimize import linear_sum_assignment
+
+from humancal.association.affinity import AffinityConfig, detection_track_affinity, pair_affinities
+from humancal.association.cycle_matching import MatchingConfig, match_frames
+from humancal.camera import CameraRig
+from humancal.detections import DenseDetections
+from humancal.geometry.triangulation import triangulate_dlt
+from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, LIMB_INDEX, NUM_JOINTS
+from humancal.lifter.lifted import LiftedPoses
+from humancal.tables import validate_table
+
+__all__ = [
+    "SKELETONS3D_SCHEMA",
+    "AssociationResult",
+    "TrackingConfig",
+    "associate",
+    "to_associations_table",
+    "to_skeletons_table",
+]
+
+logger = logging.getLogger(__name__)
+
+_BODY_BONES = np.array(LIMB_INDEX[:12])
+"""Arms, legs, shoulder and hip widths, torso sides: the bones whose lengths say who a person is."""
+_HIPS = np.array([JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]])
+_MIN_JOINTS = 3
+"""A skeleton needs this many triangulated joints to be tracked, and a cluster this many joints in common with a
+track to be compared with it."""
+_PREDICTION_FRAMES = 5
+"""A lost track's skeleton is extrapolated by its velocity for at most this many frames (people stop)."""
+
+SKELETONS3D_SCHEMA = pa.schema(
+    [
+        ("sequence", pa.string()),
+        ("frame", pa.int32()),
+        ("person_id", pa.int32()),
+        ("joint", pa.string()),
+        ("x_m", pa.float64()),
+        ("y_m", pa.float64()),
+        ("z_m", pa.float64()),
+        ("num_views", pa.int32()),
+        ("valid", pa.bool_()),
+    ]
+)
+"""Proposed ``skeletons3d`` table: the triangulated 3D joints of every person and frame, world metres, one row per
+(frame, person_id, joint); ``num_views`` views triangulated the joint (0 and NaN coordinates where none could:
+``valid`` False). The columns of ``poses3d`` plus ``num_views``."""
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Settings of :func:`associate` (defaults chosen on synthetic scenes, ``docs/association.md``).
+
+    Attributes:
+        affinity: the affinity's weights and scales.
+        matching: the matching's solver settings (its ``match_threshold`` is replaced by ``match_threshold``).
+        match_threshold: affinity a pair must exceed to gain from being matched, in [0, 1].
+        temporal: whether the temporal term (detections against the previous frame's tracks) is used.
+        fps: frame rate of the sequence, frames per second (turns the durations below into frames).
+        reid_window_s: how long a lost track waits to be re-identified, seconds (>= 0); later it is closed and a
+            returning person starts a new track.
+        assign_distance_m: largest mean 3D joint distance between a cluster's skeleton and a track's predicted
+            skeleton one frame later for the cluster to continue the track, metres.
+        reid_speed_mps: after a gap the distance allowed grows by this speed times the gap, metres per second.
+        bone_tolerance: after a gap, the median relative difference of the body's bone lengths (arms, legs,
+            shoulder and hip widths, torso sides) between a cluster and a track must stay below it (> 0).
+        min_views: views a cluster needs to start a track (>= 2).
+        min_track_s: a track observed for less than this is rejected as a false positive, seconds (>= 0).
+        outlier_threshold_px: triangulation drops, per joint, the views that reproject farther than this, pixels.
+        num_people: the number of people if known (at most this many ids are kept), or None to estimate it.
+    """
+
+    affinity: AffinityConfig = field(default_factory=AffinityConfig)
+    matching: MatchingConfig = field(default_factory=MatchingConfig)
+    match_threshold: float = 0.3
+    temporal: bool = True
+    fps: float = 30.0
+    reid_window_s: float = 3.0
+    assign_distance_m: float = 0.5
+    reid_speed_mps: float = 1.5
+    bone_tolerance: float = 0.2
+    min_views: int = 2
+    min_track_s: float = 0.3
+    outlier_threshold_px: float = 25.0
+    num_people: int | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.affinity, AffinityConfig):
+            raise ValueError(f"TrackingConfig.affinity must be an AffinityConfig, got {type(self.affinity).__name__}")
+        if not isinstance(self.matching, MatchingConfig):
+            raise ValueError(f"TrackingConfig.matching must be a MatchingConfig, got {type(self.matching).__name__}")
+        if not 0.0 <= self.match_threshold <= 1.0:
+            raise ValueError(f"TrackingConfig.match_threshold must lie in [0, 1], got {self.match_threshold}")
+        for name in ("fps", "assign_distance_m", "bone_tolerance", "outlier_threshold_px"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"TrackingConfig.{name} must be a positive number, got {value}")
+        for name in ("reid_window_s", "reid_speed_mps", "min_track_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"TrackingConfig.{name} must be a number >= 0, got {value}")
+        if isinstance(self.min_views, bool) or not isinstance(self.min_views, (int, np.integer)) or self.min_views < 2:
+            raise ValueError(f"TrackingConfig.min_views must be an integer >= 2, got {self.min_views}")
+        if self.num_people is not None and (isinstance(self.num_people, bool)
+                                            or not isinstance(self.num_people, (int, np.integer))
+                                            or self.num_people < 1):
+            raise ValueError(f"TrackingConfig.num_people must be None (estimate it) or an integer >= 1, "
+                             f"got {self.num_people}")
+
+    @property
+    def matching_config(self) -> MatchingConfig:
+        """The matching settings with this config's ``match_threshold``."""
+        return replace(self.matching, match_threshold=self.match_threshold)
+
+
+@dataclass(frozen=True)
+class AssociationResult:
+    """Who is who in a sequence, and the 3D skeletons.
+
+    Attributes:
+        frame, view, det_id: (D,) int64 keys of the detections, in the input's row order.
+        person_id: (D,) int64 person of every detection, 0..num_people-1 numbered by first appearance; -1:
+            rejected (a false positive, or a detection no cluster took).
+        skeleton_frame: (S,) int64 frame of every skeleton (sorted by frame, then person).
+        skeleton_person: (S,) int64 person of every skeleton.
+        joints_world_m: (S, 23, 3) triangulated canonical joints, world frame, metres (NaN where not triangulated).
+        joint_views: (S, 23) int64 views each joint was triangulated from (0 where not).
+        num_views: (S,) int64 detections (views) in the person's cluster of that frame.
+        num_people: the number of people (estimated, or the one given where that many were found).
+        stage_seconds: seconds per stage (``affinity``, ``matching``, ``triangulation``, ``tracking``,
+            ``temporal``, ``total``).
+        warnings: what went wrong without stopping the association (e.g. a view without detections).
+    """
+
+    frame: np.ndarray
+    view: np.ndarray
+    det_id: np.ndarray
+    person_id: np.ndarray
+    skeleton_frame: np.ndarray
+    skeleton_person: np.ndarray
+    joints_world_m: np.ndarray
+    joint_views: np.ndarray
+    num_views: np.ndarray
+    num_people: int
+    stage_seconds: dict[str, float]
+    warnings: tuple[str, ...] = ()
+
+
+# ------------------------------------------------------------------------------------------------------- clusters
+
+
+def _check_inputs(detections: DenseDetections, lifted: LiftedPoses | None, rig: CameraRig) -> list[str]:
+    """Raise on input nothing sensible can come from; return warnings for input that is odd but usable."""
+    if len(rig) < 2:
+        raise ValueError(f"associate needs at least 2 cameras to tell people apart across views, the rig has "
+                         f"{len(rig)}")
+    D = len(detections)
+    if D == 0:
+        raise ValueError("associate: there are no detections")
+    view = np.asarray(detections.view)
+    if view.min() < 0 or view.max() >= len(rig):
+        raise ValueError(f"associate: detections use views {int(view.min())}..{int(view.max())} but the rig has "
+                         f"{len(rig)} cameras (views 0..{len(rig) - 1})")
+    if lifted is not None and len(lifted) != D:
+        raise ValueError(f"associate: lifted poses must be row-aligned with the detections, {len(lifted)} vs {D}")
+    seen = np.unique(view)
+    if len(seen) < 2:
+        raise ValueError(f"associate: every detection comes from view {int(seen[0])}; cross-view association "
+                         "needs detections in at least 2 views")
+    missing = sorted(set(range(len(rig))) - set(seen.tolist()))
+    return [f"view {v} has no detections" for v in missing]
+
+
+def _undistorted_px(detections: DenseDetections, rig: CameraRig) -> np.ndarray:
+    """(D, 23, 2) keypoints with the lens distortion undone (pixels of the ideal pinhole with the same K)."""
+    kp = np.asarray(detections.keypoints_px, dtype=np.float64).copy()
+    for v in np.flatnonzero(np.abs(rig.distortion).sum(1) > 0):
+        rows = np.flatnonzero(detections.view == v)
+        pts = kp[rows].reshape(-1, 1, 2)
+        ok = np.isfinite(pts).all(-1)[:, 0]
+        if ok.any():
+            pts[ok] = cv2.undistortPoints(pts[ok], rig.K[v], rig.distortion[v], P=rig.K[v])
+        kp[rows] = pts.reshape(len(rows), NUM_JOINTS, 2)
+    return kp
+
+
+def _linear_points(cameras: list, points_px: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The confidence-weighted DLT of :func:`~humancal.geometry.triangulation.triangulate_dlt` (same rows, same
+    weights) with the homogeneous coordinate fixed to 1: (N, 3) points from (N, 3, 3) normal equations solved in
+    closed form (no per-point decomposition), and (N, 2V) reprojection errors as (V, N) pixels.
+
+    Args:
+        cameras: V pinhole cameras (no distortion).
+        points_px: (V, N, 2) pixels (any value where the weight is 0).
+        weights: (V, N) confidences, 0 where missing.
+
+    Returns:
+        points_world_m: (N, 3), NaN with fewer than 2 views or a singular system; errors_px: (V, N), NaN where
+        missing.
+    """
+    V, N = weights.shape
+    K = np.stack([c.K for c in cameras])
+    K_inv = np.linalg.inv(K)
+    Rt = np.stack([np.hstack([c.R_cam_from_world, c.t_cam_from_world_m[:, None]]) for c in cameras])  # (V, 3, 4)
+    u, v = np.nan_to_num(points_px[..., 0]), np.nan_to_num(points_px[..., 1])
+    x = K_inv[:, None, 0, 0] * u + K_inv[:, None, 0, 1] * v + K_inv[:, None, 0, 2]
+    y = K_inv[:, None, 1, 1] * v + K_inv[:, None, 1, 2]
+    # The DLT rows of a view, w (x P2 - P0) and w (y P2 - P1) with P = [R | t], summed as outer products:
+    # w^2 ((x^2 + y^2) P2 P2^T - x (P2 P0^T + P0 P2^T) - y (P2 P1^T + P1 P2^T) + P0 P0^T + P1 P1^T);
+    # the four coefficients of every point and view times the views' constant 4x4 terms: one matrix product.
+    w2 = weights * weights
+    coef = np.stack([w2 * (x * x + y * y), -w2 * x, -w2 * y, w2], -1)  # (V, N, 4)
+    P0, P1, P2 = Rt[:, 0], Rt[:, 1], Rt[:, 2]
+    outer = lambda a, b: a[:, :, None] * b[:, None, :]  # noqa: E731
+    basis = np.stack([outer(P2, P2), outer(P2, P0) + outer(P0, P2), outer(P2, P1) + outer(P1, P2),
+                      outer(P0, P0) + outer(P1, P1)], 1)  # (V, 4, 4, 4)
+    M = (coef.transpose(1, 0, 2).reshape(N, 4 * V) @ basis.reshape(4 * V, 16)).reshape(N, 4, 4)
+    A, b = M[:, :3, :3], -M[:, :3, 3]
+    cof = np.stack([np.cross(A[:, 1], A[:, 2]), np.cross(A[:, 2], A[:, 0]), np.cross(A[:, 0], A[:, 1])], 1)
+    det = np.einsum("ni,ni->n", A[:, 0], cof[:, 0])
+    scale = np.abs(A).max((1, 2))
+    ok = ((weights > 0).sum(0) >= 2) & (np.abs(det) > 1e-12 * np.maximum(scale, 1e-300) ** 3)
+    X = np.full((N, 3), np.nan)
+    X[ok] = (cof[ok] * b[ok, :, None]).sum(1) / det[ok, None]
+    # Reprojection errors, on a NaN-free copy (NaN slows the products down; those points are masked after).
+    cam = np.swapaxes(Rt[:, :, :3] @ np.where(ok[:, None], X, 0.0).T, 1, 2) + Rt[:, None, :, 3]  # (V, N, 3)
+    depth = cam[..., 2]
+    front = depth > 0
+    safe = np.where(front, depth, 1.0)
+    xc, yc = cam[..., 0] / safe, cam[..., 1] / safe
+    du = K[:, None, 0, 0] * xc + K[:, None, 0, 1] * yc + K[:, None, 0, 2] - np.nan_to_num(points_px[..., 0])
+    dv = K[:, None, 1, 1] * yc + K[:, None, 1, 2] - np.nan_to_num(points_px[..., 1])
+    errors = np.where(front, np.sqrt(du * du + dv * dv), np.inf)
+    errors[(weights <= 0) | ~ok[None]] = np.nan
+    return X, errors
+
+
+def _triangulate(cluster: np.ndarray, n_clusters: int, view: np.ndarray, keypoints_px: np.ndarray,
+                 scores: np.ndarray, cameras: list, threshold_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(C, 23, 3) joints and (C, 23) views used of clusters 0..C-1 (``cluster``: (D,) global cluster or -1).
+
+    Every joint is solved in closed form first (:func:`_linear_points`); the joints with a view that reprojects
+    farther than ``threshold_px`` (a few per cent: left-right flips, mislabelled joints) are solved again by
+    :func:`~humancal.geometry.triangulation.triangulate_dlt` with its outlier-view rejection.
+    """
+    if n_clusters == 0:
+        return np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS), np.int64)
+    V = len(cameras)
+    points = np.full((V, n_clusters, NUM_JOINTS, 2), np.nan)
+    weights = np.zeros((V, n_clusters, NUM_JOINTS))
+    m = cluster >= 0
+    points[view[m], cluster[m]] = keypoints_px[m]
+    weights[view[m], cluster[m]] = scores[m]
+    points, weights = points.reshape(V, -1, 2), weights.reshape(V, -1)
+    X, errors = _linear_points(cameras, points, weights)
+    used = (weights > 0).sum(0)
+    used[~np.isfinite(X).all(-1)] = 0
+    redo = (np.nan_to_num(errors, nan=0.0).max(0) > threshold_px) & (used > 2)
+    if redo.any():
+        X[redo], used[redo] = triangulate_dlt(cameras, points[:, redo], weights[:, redo], min_views=2,
+                                              outlier_threshold_px=threshold_px)
+    return X.reshape(n_clusters, NUM_JOINTS, 3), used.reshape(n_clusters, NUM_JOINTS).astype(np.int64)
+
+
+def _global_clusters(matchings, frame_start: np.ndarray, D: int) -> tuple[np.ndarray, np.ndarray]:
+    """(D,) global cluster of every (sorted) detection or -1, and (C,) frame index of every cluster."""
+    cluster = np.full(D, -1, np.int64)
+    frame_of = []
+    offset = 0
+    for i, m in enumerate(matchings):
+        c = m.cluster
+        cluster[frame_start[i]:frame_start[i + 1]] = np.where(c >= 0, c + offset, -1)
+        k = int(c.max()) + 1 if len(c) and c.max() >= 0 else 0
+        frame_of.extend([i] * k)
+        offset += k
+    return cluster, np.asarray(frame_of, np.int64)
+
+
+# -------------------------------------------------------------------------------------------------------- tracks
+
+
+def _bone_lengths(joints: np.ndarray) -> np.ndarray:
+    """(..., B) lengths of the body bones (NaN where a joint is missing), metres."""
+    return np.linalg.norm(joints[..., _BODY_BONES[:, 0], :] - joints[..., _BODY_BONES[:, 1], :], axis=-1)
+
+
+def _bone_mismatch(a: np.ndarray, b: np.ndarray) -> float:
+    """Median relative difference of two (B,) bone-length vectors (0 when they share no bone)."""
+    ok = np.isfinite(a) & np.isfinite(b) & (b > 0)
+    return float(np.median(np.abs(a[ok] - b[ok]) / b[ok])) if ok.any() else 0.0
+
+
+class _Track:
+    """A track being built: its last skeleton, velocity and observed bone lengths."""
+
+    def __init__(self, index: int, frame: int, joints: np.ndarray):
+        self.index = index
+        self.first = self.last = frame
+        self.joints = joints.copy()
+        self.velocity = np.zeros(3)
+        self.frames = 1
+        self.bones = [_bone_lengths(joints)]
+
+    def predicted(self, frame: int) -> np.ndarray:
+        return self.joints + self.velocity * min(frame - self.last, _PREDICTION_FRAMES)
+
+    def body(self) -> np.ndarray:
+        return np.nanmedian(np.stack(self.bones[-30:]), axis=0)
+
+    def update(self, frame: int, joints: np.ndarray) -> None:
+        old, new = _centre(self.joints), _centre(joints)
+        if np.isfinite(old).all() and np.isfinite(new).all():
+            step = (new - old) / (frame - self.last)
+            self.velocity = step if self.frames == 1 else 0.5 * (self.velocity + step)
+        ok = np.isfinite(joints).all(-1)
+        self.joints[ok] = joints[ok]
+        self.last = frame
+        self.frames += 1
+        self.bones.append(_bone_lengths(joints))
+
+
+def _centre(joints: np.ndarray) -> np.ndarray:
+    """(3,) hip midpoint, or the mean of the known joints without both hips."""
+    hips = joints[_HIPS]
+    if np.isfinite(hips).all():
+        return hips.mean(0)
+    known = np.isfinite(joints).all(-1)
+    return joints[known].mean(0) if known.any() else np.full(3, np.nan)
+
+
+def _mean_joint_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(T, S) mean distance over the joints both (T, 23, 3) and (S, 23, 3) know (inf below ``_MIN_JOINTS``)."""
+    d = np.linalg.norm(a[:, None] - b[None], axis=-1)
+    ok = np.isfinite(d)
+    n = ok.sum(-1)
+    mean = np.where(ok, d, 0.0).sum(-1) / np.maximum(n, 1)
+    return np.where(n >= _MIN_JOINTS, mean, np.inf)
+
+
+def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: TrackingConfig) -> np.ndarray:
+    """(S,) track of every skeleton (``frames`` sorted), -1 where none took it."""
+    window = config.reid_window_s * config.fps
+    track_of = np.full(len(frames), -1, np.int64)
+    tracks: list[_Track] = []
+    trackable = np.isfinite(joints).all(-1).sum(-1) >= _MIN_JOINTS
+    starts = np.flatnonzero(np.r_[True, np.diff(frames) > 0, True])
+    for lo, hi in zip(starts[:-1], starts[1:]):
+        f = int(frames[lo])
+        rows = lo + np.flatnonzero(trackable[lo:hi])
+        alive = [t for t in tracks if f - t.last <= window + 1]
+        if alive and len(rows):
+            gap = np.array([f - t.last for t in alive], dtype=np.float64)
+            distance = _mean_joint_distance(np.stack([t.predicted(f) for t in alive]), joints[rows])
+            gate = config.assign_distance_m + config.reid_speed_mps * (gap - 1.0) / config.fps
+            cost = distance / gate[:, None]
+            for i in np.flatnonzero(gap > 1):  # re-identification: the same body
+                body = alive[i].body()
+                for j in np.flatnonzero(cost[i] <= 1.0):
+                    if _bone_mismatch(_bone_lengths(joints[rows[j]]), body) > config.bone_tolerance:
+                        cost[i, j] = np.inf
+            ti, si = linear_sum_assignment(np.where(cost <= 1.0, cost, 1e6))
+            for i, j in zip(ti, si):
+                if cost[i, j] <= 1.0:
+                    alive[i].update(f, joints[rows[j]])
+                    track_of[rows[j]] = alive[i].index
+        for j in rows[track_of[rows] < 0]:
+            if views[j] >= config.min_views:
+                tracks.append(_Track(len(tracks), f, joints[j]))
+                track_of[j] = tracks[-1].index
+    return track_of
+
+
+def _keep_tracks(track_of: np.ndarray, frames: np.ndarray, joints: np.ndarray, config: TrackingConfig,
+                 warnings: list[str]) -> np.ndarray:
+    """(S,) final person of every skeleton (0..P-1 by first appearance, -1: rejected): short tracks rejected,
+    then (``num_people`` given) surplus tracks merged or dropped."""
+    track_of = track_of.copy()
+    ids, length = np.unique(track_of[track_of >= 0], return_counts=True)
+    min_frames = max(1, int(np.ceil(config.min_track_s * config.fps - 1e-9)))
+    for t in ids[length < min_frames]:
+        track_of[track_of == t] = -1
+    kept = np.unique(track_of[track_of >= 0])
+    if config.num_people is not None and len(kept) > config.num_people:
+        track_of = _merge_surplus(track_of, frames, joints, config)
+    return _number_by_first_frame(track_of, frames)
+
+
+def _merge_surplus(track_of: np.ndarray, frames: np.ndarray, joints: np.ndarray, config: TrackingConfig) -> np.ndarray:
+    """Bring the tracks down to ``num_people``: the shortest merges into the track it never overlaps in time with,
+    with the same bone lengths (within ``bone_tolerance``) and nearest at the junction; dropped without one."""
+    track_of = track_of.copy()
+    while True:
+        ids, length = np.unique(track_of[track_of >= 0], return_counts=True)
+        if len(ids) <= config.num_people:
+            return track_of
+        short = ids[np.argmin(length)]
+        mine = np.flatnonzero(track_of == short)
+        body = np.nanmedian(_bone_lengths(joints[mine]), axis=0)
+        best, best_cost = -1, np.inf
+        for other in ids[ids != short]:
+            theirs = np.flatnonzero(track_of == other)
+            if np.intersect1d(frames[mine], frames[theirs]).size:
+                continue
+            if _bone_mismatch(body, np.nanmedian(_bone_lengths(joints[theirs]), axis=0)) > config.bone_tolerance:
+                continue
+            # the nearest skeletons in time on both sides of the junction
+            gap = np.abs(frames[mine][:, None] - frames[theirs][None, :])
+            i, j = np.unravel_index(np.argmin(gap), gap.shape)
+            distance = _mean_joint_distance(joints[mine[i]][None], joints[theirs[j]][None])[0, 0]
+            cost = distance / (config.assign_distance_m + config.reid_speed_mps * (gap[i, j] - 1) / config.fps)
+            if cost < best_cost:
+                best, best_cost = other, cost
+        if best >= 0:
+            logger.info("associate: num_people=%d: track %d (%d frames) merged into track %d", config.num_people,
+                        short, len(mine), best)
+            track_of[mine] = best
+        else:
+            logger.info("associate: num_people=%d: track %d (%d frames) dropped (no track to merge it into)",
+                        config.num_people, short, len(mine))
+            track_of[mine] = -1
+
+
+def _number_by_first_frame(track_of: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    ids = np.unique(track_of[track_of >= 0])
+    first = np.array([frames[track_of == t].min() for t in ids])
+    renumber = np.full(int(track_of.max()) + 1 if len(ids) else 0, -1, np.int64)
+    renumber[ids[np.lexsort((ids, first))]] = np.arange(len(ids))
+    return np.where(track_of >= 0, renumber[np.maximum(track_of, 0)] if len(ids) else -1, -1)
+
+
+# --------------------------------------------------------------------------------------------------------- entry
+
+
+def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: CameraRig,
+              config: TrackingConfig = TrackingConfig()) -> AssociationResult:
+    """Person ids of every detection across views and frames, and the people's triangulated 3D skeletons.
+
+    See the module docstring for the stages.
+
+    Args:
+        detections: D detections of one sequence (any row order; ``det_id`` numbers the detections of a
+            (frame, view)).
+        lifted: their lifted 3D poses (row-aligned; crop or camera frames), or None for the geometric affinity
+            alone.
+        rig: the cameras (view index = row of the rig).
+        config: the settings.
+
+    Returns:
+        The :class:`AssociationResult` (detections in the input's row order).
+
+    Raises:
+        ValueError: fewer than 2 cameras, no detections, detections of a single view, views the rig lacks,
+            lifted poses not row-aligned.
+    """
+    start = time.perf_counter()
+    warnings = _check_inputs(detections, lifted, rig)
+    seconds: dict[str, float] = {}
+    frame_in = np.asarray(detections.frame, dtype=np.int64)
+    order = np.argsort(frame_in, kind="stable")
+    dense = DenseDetections(frame_in[order], np.asarray(detections.view, np.int64)[order],
+                            np.asarray(detections.det_id, np.int64)[order],
+                            np.asarray(detections.keypoints_px, np.float64)[order],
+                            np.asarray(detections.scores, np.float64)[order])
+    lifted_sorted = None if lifted is None else lifted.subset(order)
+    matching = config.matching_config
+
+    t0 = time.perf_counter()
+    pairs = pair_affinities(dense, lifted_sorted, rig, config.affinity)
+    matrices = pairs.matrices()
+    views = [dense.view[pairs.frame_start[i]:pairs.frame_start[i + 1]] for i in range(len(pairs.frames))]
+    seconds["affinity"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    matchings = match_frames(views, matrices, matching)
+    seconds["matching"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    cameras = [replace(c, distortion=np.zeros(5)) for c in rig.to_cameras()]
+    keypoints = _undistorted_px(dense, rig)
+    scores = np.where(np.isfinite(keypoints).all(-1), dense.scores, 0.0)
+
+    def triangulated(matchings):
+        cluster, cluster_frame = _global_clusters(matchings, pairs.frame_start, len(dense))
+        joints, used = _triangulate(cluster, len(cluster_frame), dense.view, keypoints, scores, cameras,
+                                    config.outlier_threshold_px)
+        views_per_cluster = np.bincount(cluster[cluster >= 0], minlength=len(cluster_frame))
+        return cluster, pairs.frames[cluster_frame], joints, used, views_per_cluster
+
+    cluster, sk_frame, joints, used, sk_views = triangulated(matchings)
+    seconds["triangulation"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    person = _keep_tracks(_track(sk_frame, joints, sk_views, config), sk_frame, joints, config, warnings)
+    seconds["tracking"] = time.perf_counter() - t0
+
+    seconds["temporal"] = 0.0
+    if config.temporal and config.affinity.uses_pose and lifted is not None:
+        t0 = time.perf_counter()
+        changed = _rematch_with_tracks(pairs, matrices, views, matchings, sk_frame, person, joints, config)
+        seconds["temporal"] = time.perf_counter() - t0
+        if changed:
+            t0 = time.perf_counter()
+            cluster, sk_frame, joints, used, sk_views = triangulated(matchings)
+            seconds["triangulation"] += time.perf_counter() - t0
+            t0 = time.perf_counter()
+            person = _keep_tracks(_track(sk_frame, joints, sk_views, config), sk_frame, joints, config, warnings)
+            seconds["tracking"] += time.perf_counter() - t0
+
+    keep = person >= 0
+    det_person_sorted = np.where(cluster >= 0, person[np.maximum(cluster, 0)] if len(person) else -1, -1)
+    det_person = np.empty(len(dense), np.int64)
+    det_person[order] = det_person_sorted
+    num_people = int(person.max()) + 1 if keep.any() else 0
+    if num_people == 0:
+        warnings.append("no person found: every detection is rejected (false positives, or no person seen by "
+                        f"{config.min_views} views for {config.min_track_s} s)")
+    if config.num_people is not None and num_people < config.num_people:
+        warnings.append(f"num_people={config.num_people} was given but only {num_people} people were found")
+    for w in warnings:
+        logger.warning("associate: %s", w)
+    rows = np.flatnonzero(keep)
+    rows = rows[np.lexsort((person[rows], sk_frame[rows]))]
+    seconds["total"] = time.perf_counter() - start
+    return AssociationResult(
+        frame=frame_in.copy(), view=np.asarray(detections.view, np.int64).copy(),
+        det_id=np.asarray(detections.det_id, np.int64).copy(), person_id=det_person,
+        skeleton_frame=sk_frame[rows], skeleton_person=person[rows], joints_world_m=joints[rows],
+        joint_views=used[rows], num_views=sk_views[rows], num_people=num_people, stage_seconds=seconds,
+        warnings=tuple(warnings))
+
+
+def _rematch_with_tracks(pairs, matrices, views, matchings, sk_frame, person, joints, config) -> int:
+    """Score every frame again with the temporal term against the previous frame's people and match again (one
+    batch) the frames where it moves a pair across the threshold; ``matchings`` is updated in place.
+
+    Returns:
+        The number of frames matched again.
+    """
+    threshold = config.match_threshold
+    tracked = person >= 0
+    frames_with = sk_frame[tracked]
+    joints_with = joints[tracked]
+    lo = np.searchsorted(frames_with, pairs.frames - 1, side="left")
+    hi = np.searchsorted(frames_with, pairs.frames - 1, side="right")
+    redo, redo_matrices = [], []
+    for i, f in enumerate(pairs.frames.tolist()):
+        if hi[i] == lo[i] or len(views[i]) < 2:
+            continue
+        rows = np.arange(pairs.frame_start[i], pairs.frame_start[i + 1])
+        T = detection_track_affinity(pairs.geometry, rows, joints_with[lo[i]:hi[i]], config.affinity)
+        A = pairs.matrix(f, T)
+        if ((A > threshold) != (matrices[i] > threshold)).any():
+            redo.append(i)
+            redo_matrices.append(A)
+    if redo:
+        again = match_frames([views[i] for i in redo], redo_matrices, config.matching_config)
+        for i, m in zip(redo, again):
+            matchings[i] = m
+    logger.debug("associate: the temporal term changed %d of %d frames", len(redo), len(pairs.frames))
+    return len(redo)
+
+
+# -------------------------------------------------------------------------------------------------------- tables
+
+
+def to_associations_table(result: AssociationResult, sequence: str) -> pd.DataFrame:
+    """The canonical ``associations`` table (sequence, frame, view, det_id, person_id) of a result."""
+    table = pd.DataFrame({"sequence": sequence, "frame": result.frame, "view": result.view,
+                          "det_id": result.det_id, "person_id": result.person_id})
+    table = table.sort_values(["frame", "view", "det_id"], kind="stable").reset_index(drop=True)
+    return validate_table(table, "associations")
+
+
+def to_skeletons_table(result: AssociationResult, sequence: str) -> pd.DataFrame:
+    """The tidy 3D skeletons of a result, columns of :data:`SKELETONS3D_SCHEMA` (one row per frame, person and
+    joint, all 23 joints of every skeleton)."""
+    S = len(result.skeleton_frame)
+    xyz = result.joints_world_m.reshape(-1, 3)
+    table = pd.DataFrame({
+        "sequence": sequence,
+        "frame": np.repeat(result.skeleton_frame, NUM_JOINTS).astype(np.int32),
+        "person_id": np.repeat(result.skeleton_person, NUM_JOINTS).astype(np.int32),
+        "joint": np.tile(np.asarray(CANONICAL_JOINTS, dtype=object), S),
+        "x_m": xyz[:, 0], "y_m": xyz[:, 1], "z_m": xyz[:, 2],
+        "num_views": result.joint_views.reshape(-1).astype(np.int32),
+        "valid": np.isfinite(xyz).all(-1),
+    })
+    return pa.Table.from_pandas(table, schema=SKELETONS3D_SCHEMA, preserve_index=False).to_pandas()
