@@ -7,8 +7,8 @@ section III-C, ``docs/association.md``).
 2. **Matching**, all frames in one batch, without the temporal term
    (:func:`~humancal.association.cycle_matching.match_frames`): per frame, clusters of detections (one person,
    at most one detection per view) and unmatched detections.
-3. **Triangulation** of every cluster, all at once (:func:`humancal.geometry.triangulation.triangulate_dlt`,
-   confidence weighted, dropping per joint the views that reproject too far: left-right flips).
+3. **Triangulation** of every cluster, all at once: the confidence-weighted DLT and per-joint outlier-view
+   rejection of :func:`humancal.geometry.triangulation.triangulate_dlt` (left-right flips), solved in closed form.
 4. **Tracking**, frame by frame: clusters are assigned to tracks by the Hungarian method
    (``scipy.optimize.linear_sum_assignment``) on the mean 3D joint distance to each track's predicted skeleton,
    gated by ``assign_distance_m``. A track that is not seen waits ``reid_window_s`` seconds; a cluster assigned
@@ -41,7 +41,6 @@ from humancal.association.affinity import AffinityConfig, detection_track_affini
 from humancal.association.cycle_matching import MatchingConfig, match_frames
 from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
-from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, LIMB_INDEX, NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
 from humancal.tables import validate_table
@@ -276,9 +275,10 @@ def _triangulate(cluster: np.ndarray, n_clusters: int, view: np.ndarray, keypoin
                  scores: np.ndarray, cameras: list, threshold_px: float) -> tuple[np.ndarray, np.ndarray]:
     """(C, 23, 3) joints and (C, 23) views used of clusters 0..C-1 (``cluster``: (D,) global cluster or -1).
 
-    Every joint is solved in closed form first (:func:`_linear_points`); the joints with a view that reprojects
-    farther than ``threshold_px`` (a few per cent: left-right flips, mislabelled joints) are solved again by
-    :func:`~humancal.geometry.triangulation.triangulate_dlt` with its outlier-view rejection.
+    The rule of :func:`~humancal.geometry.triangulation.triangulate_dlt` (confidence-weighted DLT rows; while a
+    joint's worst view reprojects farther than ``threshold_px`` and more than 2 views remain, that view is dropped
+    and the joint solved again), with the closed-form solve of :func:`_linear_points` (the SVD per point and the
+    reprojection through the generic projection cost ~10x more on the benchmark workload).
     """
     if n_clusters == 0:
         return np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS), np.int64)
@@ -290,12 +290,16 @@ def _triangulate(cluster: np.ndarray, n_clusters: int, view: np.ndarray, keypoin
     weights[view[m], cluster[m]] = scores[m]
     points, weights = points.reshape(V, -1, 2), weights.reshape(V, -1)
     X, errors = _linear_points(cameras, points, weights)
-    used = (weights > 0).sum(0)
-    used[~np.isfinite(X).all(-1)] = 0
-    redo = (np.nan_to_num(errors, nan=0.0).max(0) > threshold_px) & (used > 2)
-    if redo.any():
-        X[redo], used[redo] = triangulate_dlt(cameras, points[:, redo], weights[:, redo], min_views=2,
-                                              outlier_threshold_px=threshold_px)
+    redo = np.arange(X.shape[0])
+    for _ in range(V - 2):
+        worst = np.where(np.isnan(errors), -np.inf, errors)
+        bad = (worst.max(0) > threshold_px) & ((weights[:, redo] > 0).sum(0) > 2)
+        if not bad.any():
+            break
+        redo, errors = redo[bad], errors[:, bad]
+        weights[np.argmax(np.where(np.isnan(errors), -np.inf, errors), 0), redo] = 0.0
+        X[redo], errors = _linear_points(cameras, points[:, redo], weights[:, redo])
+    used = np.where(np.isfinite(X).all(-1), (weights > 0).sum(0), 0)
     return X.reshape(n_clusters, NUM_JOINTS, 3), used.reshape(n_clusters, NUM_JOINTS).astype(np.int64)
 
 
@@ -328,41 +332,38 @@ def _bone_mismatch(a: np.ndarray, b: np.ndarray) -> float:
 
 
 class _Track:
-    """A track being built: its last skeleton, velocity and observed bone lengths."""
+    """A track being built: its last skeleton, velocity and the skeleton rows it took."""
 
-    def __init__(self, index: int, frame: int, joints: np.ndarray):
+    def __init__(self, index: int, frame: int, row: int, joints: np.ndarray, centre: np.ndarray):
         self.index = index
-        self.first = self.last = frame
+        self.last = frame
         self.joints = joints.copy()
+        self.centre = centre
         self.velocity = np.zeros(3)
-        self.frames = 1
-        self.bones = [_bone_lengths(joints)]
+        self.rows = [row]
 
     def predicted(self, frame: int) -> np.ndarray:
         return self.joints + self.velocity * min(frame - self.last, _PREDICTION_FRAMES)
 
-    def body(self) -> np.ndarray:
-        return np.nanmedian(np.stack(self.bones[-30:]), axis=0)
-
-    def update(self, frame: int, joints: np.ndarray) -> None:
-        old, new = _centre(self.joints), _centre(joints)
-        if np.isfinite(old).all() and np.isfinite(new).all():
-            step = (new - old) / (frame - self.last)
-            self.velocity = step if self.frames == 1 else 0.5 * (self.velocity + step)
-        ok = np.isfinite(joints).all(-1)
+    def update(self, frame: int, row: int, joints: np.ndarray, centre: np.ndarray) -> None:
+        if np.isfinite(centre).all():
+            if np.isfinite(self.centre).all():
+                step = (centre - self.centre) / (frame - self.last)
+                self.velocity = step if len(self.rows) == 1 else 0.5 * (self.velocity + step)
+            self.centre = centre
+        ok = np.isfinite(joints[:, 0])
         self.joints[ok] = joints[ok]
         self.last = frame
-        self.frames += 1
-        self.bones.append(_bone_lengths(joints))
+        self.rows.append(row)
 
 
-def _centre(joints: np.ndarray) -> np.ndarray:
-    """(3,) hip midpoint, or the mean of the known joints without both hips."""
-    hips = joints[_HIPS]
-    if np.isfinite(hips).all():
-        return hips.mean(0)
+def _centres(joints: np.ndarray) -> np.ndarray:
+    """(S, 3) hip midpoints, or the mean of the known joints where a hip is missing (NaN without any)."""
     known = np.isfinite(joints).all(-1)
-    return joints[known].mean(0) if known.any() else np.full(3, np.nan)
+    with np.errstate(invalid="ignore"):
+        mean = np.where(known[..., None], joints, 0.0).sum(1) / known.sum(1)[:, None]
+    hips = joints[:, _HIPS].mean(1)
+    return np.where(np.isfinite(hips).all(-1, keepdims=True), hips, mean)
 
 
 def _mean_joint_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -380,6 +381,7 @@ def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: Tr
     track_of = np.full(len(frames), -1, np.int64)
     tracks: list[_Track] = []
     trackable = np.isfinite(joints).all(-1).sum(-1) >= _MIN_JOINTS
+    centres, bones = _centres(joints), _bone_lengths(joints)
     starts = np.flatnonzero(np.r_[True, np.diff(frames) > 0, True])
     for lo, hi in zip(starts[:-1], starts[1:]):
         f = int(frames[lo])
@@ -391,18 +393,18 @@ def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: Tr
             gate = config.assign_distance_m + config.reid_speed_mps * (gap - 1.0) / config.fps
             cost = distance / gate[:, None]
             for i in np.flatnonzero(gap > 1):  # re-identification: the same body
-                body = alive[i].body()
+                body = np.nanmedian(bones[alive[i].rows[-30:]], axis=0)
                 for j in np.flatnonzero(cost[i] <= 1.0):
-                    if _bone_mismatch(_bone_lengths(joints[rows[j]]), body) > config.bone_tolerance:
+                    if _bone_mismatch(bones[rows[j]], body) > config.bone_tolerance:
                         cost[i, j] = np.inf
             ti, si = linear_sum_assignment(np.where(cost <= 1.0, cost, 1e6))
             for i, j in zip(ti, si):
                 if cost[i, j] <= 1.0:
-                    alive[i].update(f, joints[rows[j]])
+                    alive[i].update(f, rows[j], joints[rows[j]], centres[rows[j]])
                     track_of[rows[j]] = alive[i].index
         for j in rows[track_of[rows] < 0]:
             if views[j] >= config.min_views:
-                tracks.append(_Track(len(tracks), f, joints[j]))
+                tracks.append(_Track(len(tracks), f, j, joints[j], centres[j]))
                 track_of[j] = tracks[-1].index
     return track_of
 
@@ -568,7 +570,8 @@ def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: Came
 
 def _rematch_with_tracks(pairs, matrices, views, matchings, sk_frame, person, joints, config) -> int:
     """Score every frame again with the temporal term against the previous frame's people and match again (one
-    batch) the frames where it moves a pair across the threshold; ``matchings`` is updated in place.
+    batch) the frames where it moves a pair across the threshold against the frame's clusters (a pair of one
+    cluster falls below it, or a pair of two rises above it); ``matchings`` is updated in place.
 
     Returns:
         The number of frames matched again.
@@ -586,7 +589,10 @@ def _rematch_with_tracks(pairs, matrices, views, matchings, sk_frame, person, jo
         rows = np.arange(pairs.frame_start[i], pairs.frame_start[i + 1])
         T = detection_track_affinity(pairs.geometry, rows, joints_with[lo[i]:hi[i]], config.affinity)
         A = pairs.matrix(f, T)
-        if ((A > threshold) != (matrices[i] > threshold)).any():
+        c = matchings[i].cluster
+        together = (c[:, None] == c[None, :]) & (c[:, None] >= 0)
+        above = A > threshold
+        if ((above != (matrices[i] > threshold)) & (above != together)).any():
             redo.append(i)
             redo_matrices.append(A)
     if redo:
