@@ -10,7 +10,7 @@ section III-C, ``docs/association.md``).
 3. **Triangulation** of every cluster, all at once: the confidence-weighted DLT and per-joint outlier-view
    rejection of :func:`humancal.geometry.triangulation.triangulate_dlt` (left-right flips), solved in closed form.
 4. **Tracking**, frame by frame: clusters are assigned to tracks by the Hungarian method
-   (``scipy.optimize.linear_sum_assignment``) on the mean 3D joint distance to each track's predicted skeleton,
+   (``scipy.optimize.linear_sum_assignment``) on the median 3D joint distance to each track's predicted skeleton,
    gated by ``assign_distance_m``. A track that is not seen waits ``reid_window_s`` seconds; a cluster assigned
    to it after a gap (re-identification after an occlusion or after the person left the views) must also lie
    within the distance the person may have walked meanwhile and have the track's bone lengths. A cluster that
@@ -95,8 +95,8 @@ class TrackingConfig:
         fps: frame rate of the sequence, frames per second (turns the durations below into frames).
         reid_window_s: how long a lost track waits to be re-identified, seconds (>= 0); later it is closed and a
             returning person starts a new track.
-        assign_distance_m: largest mean 3D joint distance between a cluster's skeleton and a track's predicted
-            skeleton one frame later for the cluster to continue the track, metres.
+        assign_distance_m: largest median 3D joint distance between a cluster's skeleton and a track's
+            predicted skeleton one frame later for the cluster to continue the track, metres.
         reid_speed_mps: after a gap the distance allowed grows by this speed times the gap, metres per second.
         bone_tolerance: after a gap, the median relative difference of the body's bone lengths (arms, legs,
             shoulder and hip widths, torso sides) between a cluster and a track must stay below it (> 0).
@@ -112,7 +112,7 @@ class TrackingConfig:
     temporal: bool = True
     fps: float = 30.0
     reid_window_s: float = 3.0
-    assign_distance_m: float = 0.5
+    assign_distance_m: float = 0.75
     reid_speed_mps: float = 1.5
     bone_tolerance: float = 0.2
     min_views: int = 2
@@ -366,13 +366,14 @@ def _centres(joints: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(hips).all(-1, keepdims=True), hips, mean)
 
 
-def _mean_joint_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(T, S) mean distance over the joints both (T, 23, 3) and (S, 23, 3) know (inf below ``_MIN_JOINTS``)."""
+def _joint_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(T, S) median distance over the joints both (T, 23, 3) and (S, 23, 3) know (inf below ``_MIN_JOINTS``):
+    a few wrong joints (a detection of someone else in the cluster, a flip) do not move it."""
     d = np.linalg.norm(a[:, None] - b[None], axis=-1)
-    ok = np.isfinite(d)
-    n = ok.sum(-1)
-    mean = np.where(ok, d, 0.0).sum(-1) / np.maximum(n, 1)
-    return np.where(n >= _MIN_JOINTS, mean, np.inf)
+    n = np.isfinite(d).sum(-1)
+    with np.errstate(all="ignore"):
+        median = np.nanmedian(np.where(n[..., None] > 0, d, 0.0), axis=-1)
+    return np.where(n >= _MIN_JOINTS, median, np.inf)
 
 
 def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: TrackingConfig) -> np.ndarray:
@@ -382,6 +383,8 @@ def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: Tr
     tracks: list[_Track] = []
     trackable = np.isfinite(joints).all(-1).sum(-1) >= _MIN_JOINTS
     centres, bones = _centres(joints), _bone_lengths(joints)
+    if len(frames) == 0:
+        return track_of
     starts = np.flatnonzero(np.r_[True, np.diff(frames) > 0, True])
     for lo, hi in zip(starts[:-1], starts[1:]):
         f = int(frames[lo])
@@ -389,7 +392,7 @@ def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: Tr
         alive = [t for t in tracks if f - t.last <= window + 1]
         if alive and len(rows):
             gap = np.array([f - t.last for t in alive], dtype=np.float64)
-            distance = _mean_joint_distance(np.stack([t.predicted(f) for t in alive]), joints[rows])
+            distance = _joint_distance(np.stack([t.predicted(f) for t in alive]), joints[rows])
             gate = config.assign_distance_m + config.reid_speed_mps * (gap - 1.0) / config.fps
             cost = distance / gate[:, None]
             for i in np.flatnonzero(gap > 1):  # re-identification: the same body
@@ -445,7 +448,7 @@ def _merge_surplus(track_of: np.ndarray, frames: np.ndarray, joints: np.ndarray,
             # the nearest skeletons in time on both sides of the junction
             gap = np.abs(frames[mine][:, None] - frames[theirs][None, :])
             i, j = np.unravel_index(np.argmin(gap), gap.shape)
-            distance = _mean_joint_distance(joints[mine[i]][None], joints[theirs[j]][None])[0, 0]
+            distance = _joint_distance(joints[mine[i]][None], joints[theirs[j]][None])[0, 0]
             cost = distance / (config.assign_distance_m + config.reid_speed_mps * (gap[i, j] - 1) / config.fps)
             if cost < best_cost:
                 best, best_cost = other, cost
