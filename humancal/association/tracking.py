@@ -371,8 +371,10 @@ def _joint_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a few wrong joints (a detection of someone else in the cluster, a flip) do not move it."""
     d = np.linalg.norm(a[:, None] - b[None], axis=-1)
     n = np.isfinite(d).sum(-1)
-    with np.errstate(all="ignore"):
-        median = np.nanmedian(np.where(n[..., None] > 0, d, 0.0), axis=-1)
+    ordered = np.sort(np.where(np.isfinite(d), d, np.inf), axis=-1)  # missing joints last
+    lower = np.take_along_axis(ordered, np.maximum(n - 1, 0)[..., None] // 2, -1)[..., 0]
+    upper = np.take_along_axis(ordered, (n // 2)[..., None], -1)[..., 0] if d.shape[-1] else lower
+    median = 0.5 * (lower + np.where(n % 2 == 0, upper, lower))
     return np.where(n >= _MIN_JOINTS, median, np.inf)
 
 
