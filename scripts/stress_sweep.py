@@ -29,6 +29,7 @@ Every scene's result is written to ``OUT/scenes/`` as it finishes: a killed swee
 ``OUT/focal_error_cdf.png`` the error distributions by behaviour.
 
     python scripts/stress_sweep.py --scenes 102 --lifters shipped,seed1.pt,seed2.pt --out /tmp/stress --jobs 2
+    python scripts/stress_sweep.py --scenes 6 --views 31 --lifters shipped,seed1.pt,seed2.pt --out /tmp/stress31
 """
 
 from __future__ import annotations
@@ -56,14 +57,16 @@ UNLABELLED_FOCAL_PCT, UNLABELLED_ANGLE_DEG = 10.0, 5.0
 """A view worse than this, with nothing saying so, is an unlabelled failure."""
 
 
-def scene_config(index: int, seed: int):
-    """The ``index``-th scene configuration and its description (a dict of the drawn factors)."""
+def scene_config(index: int, seed: int, views: int | None = None):
+    """The ``index``-th scene configuration and its description (a dict of the drawn factors); ``views`` replaces
+    the drawn number of views (the other draws stay the same)."""
     from humancal.synthetic import preset
 
     rng = np.random.default_rng([seed, index])
     behaviour = BEHAVIOURS[index % 4]
-    views = int(rng.choice([2, int(rng.integers(3, 9)), int(rng.integers(9, 21)), int(rng.integers(21, 32))],
-                           p=[0.1, 0.55, 0.2, 0.15]))
+    drawn_views = int(rng.choice([2, int(rng.integers(3, 9)), int(rng.integers(9, 21)), int(rng.integers(21, 32))],
+                                 p=[0.1, 0.55, 0.2, 0.15]))
+    views = views or drawn_views
     frames = int(round(np.exp(rng.uniform(np.log(20), np.log(300)))))
     people = int(rng.integers(2, 7))
     lo = float(rng.uniform(500, 2000))
@@ -115,7 +118,7 @@ def _checks(cameras, people_m, floor_known: bool, body_size_ratio: float) -> lis
     return [name for name, report in reports.items() if not report.passed]
 
 
-def run_scene(index: int, seed: int) -> dict:
+def run_scene(index: int, seed: int, views: int | None = None) -> dict:
     """Generate, lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}."""
     from evaluation.camera_metrics import camera_errors
     from humancal.calibration import CalibrationError, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
@@ -124,7 +127,7 @@ def run_scene(index: int, seed: int) -> dict:
     from humancal.synthetic import generate_scene
     from humancal.synthetic.activities import ACTIVITIES
 
-    config, scene_row = scene_config(index, seed)
+    config, scene_row = scene_config(index, seed, views)
     lifter_seed, lifter = _WORKER["lifters"][(index // 4) % len(_WORKER["lifters"])]
     scene_row.update(scene=index, lifter_seed=lifter_seed)
     clock = time.perf_counter()
@@ -186,9 +189,9 @@ def run_scene(index: int, seed: int) -> dict:
     return {"scene": scene_row, "views": views}
 
 
-def _run_and_store(job: tuple[int, int, str]) -> tuple[int, str]:
-    index, seed, folder = job
-    result = run_scene(index, seed)
+def _run_and_store(job: tuple[int, int, str, int | None]) -> tuple[int, str]:
+    index, seed, folder, views = job
+    result = run_scene(index, seed, views)
     path = Path(folder) / f"scene_{index:04d}.json"
     partial = path.with_suffix(".partial")
     partial.write_text(json.dumps(result, default=float))
@@ -303,7 +306,9 @@ def main() -> None:
                         help="comma-separated lifter checkpoints ('shipped' for the packaged weights)")
     parser.add_argument("--out", type=Path, required=True, help="folder for the per-scene results and summaries")
     parser.add_argument("--jobs", type=int, default=1, help="scenes calibrated in parallel (one process each)")
-    parser.add_argument("--only", default=None, help="comma-separated scene indices (debugging)")
+    parser.add_argument("--only", default=None, help="comma-separated scene indices")
+    parser.add_argument("--views", type=int, default=None,
+                        help="every scene gets this many views instead of the drawn number (e.g. 31)")
     args = parser.parse_args()
     specs = [s.strip() for s in args.lifters.split(",") if s.strip()]
     for spec in specs:
@@ -316,7 +321,7 @@ def main() -> None:
     print(f"{len(indices) - len(todo)} scenes already done in {folder}; {len(todo)} to run", flush=True)
     start = time.perf_counter()
     if todo:
-        jobs = [(i, args.seed, str(folder)) for i in todo]
+        jobs = [(i, args.seed, str(folder), args.views) for i in todo]
         if args.jobs > 1:
             with multiprocessing.get_context("spawn").Pool(args.jobs, _init_worker, (specs,)) as pool:
                 for done, (_, line) in enumerate(pool.imap_unordered(_run_and_store, jobs), 1):

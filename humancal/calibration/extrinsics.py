@@ -65,7 +65,10 @@ class ExtrinsicsConfig:
         min_pair_support: a view pair needs this many supporting detections to be an edge.
         linear_iterations: passes of (root positions, linear focal + translation solve).
         linear_max_rel_std: a view whose linear focal has a larger data-only relative std is resected instead.
-        single_view_min_rel_std: floor on the prior std of well-conditioned single-view focal lengths.
+        single_view_min_rel_std: floor on the prior std of well-conditioned single-view focal lengths. 0.3: on the
+            stress sweep's synthetic scenes (portrait images, cameras near the horizon or steeply down) 4 of the 13
+            single-view focal lengths that claimed to be good were 12-54 % off, and a 5 % prior dragged the bundle
+            adjustment after them; the views' multi-view data decide, the single-view value mainly starts them.
         focal_range_rel: allowed focal range, multiples of the image diagonal (clips the initial values).
         max_groups: matched groups used by the bundle adjustment (spread over the sequence).
         shape_std_m: std of the lifted joints in the bundle adjustment, metres (chosen on seeded synthetic scenes
@@ -97,7 +100,7 @@ class ExtrinsicsConfig:
     min_pair_support: int = 5
     linear_iterations: int = 6
     linear_max_rel_std: float = 0.15
-    single_view_min_rel_std: float = 0.05
+    single_view_min_rel_std: float = 0.3
     focal_range_rel: tuple[float, float] = (0.15, 5.0)
     max_groups: int = 200
     shape_std_m: float = 0.5
