@@ -16,9 +16,10 @@ from typing import Any, ClassVar, Literal
 import dagster as dg
 from pydantic import Field
 
+from humancal.association import AffinityConfig, TrackingConfig
 from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig
 
-__all__ = ["IntrinsicsSettings", "ExtrinsicsSettings", "attribute_docs", "library_field"]
+__all__ = ["IntrinsicsSettings", "ExtrinsicsSettings", "AssociationSettings", "attribute_docs", "library_field"]
 
 
 def attribute_docs(cls: type) -> dict[str, str]:
@@ -123,3 +124,36 @@ class ExtrinsicsSettings(dg.Config):
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""
         return _to_library(self, ExtrinsicsConfig)
+
+
+_T = TrackingConfig
+_A = AffinityConfig
+
+
+class AssociationSettings(dg.Config):
+    """Settings of the ``associations`` asset (:class:`humancal.association.TrackingConfig`, its scalar fields,
+    and the two weights of its :class:`~humancal.association.AffinityConfig`; the other affinity and matching
+    settings keep the library's defaults)."""
+
+    PIPELINE_DEFAULTS: ClassVar[dict[str, Any]] = {}
+
+    geometric_weight: float = library_field(_A, "geometric_weight")
+    pose_weight: float = library_field(_A, "pose_weight")
+    match_threshold: float = library_field(_T, "match_threshold")
+    temporal: bool = library_field(_T, "temporal")
+    fps: float = library_field(_T, "fps")
+    reid_window_s: float = library_field(_T, "reid_window_s")
+    assign_distance_m: float = library_field(_T, "assign_distance_m")
+    reid_speed_mps: float = library_field(_T, "reid_speed_mps")
+    bone_tolerance: float = library_field(_T, "bone_tolerance")
+    min_views: int = library_field(_T, "min_views")
+    min_track_s: float = library_field(_T, "min_track_s")
+    outlier_threshold_px: float = library_field(_T, "outlier_threshold_px")
+    num_people: int | None = library_field(_T, "num_people")
+
+    def to_library(self) -> TrackingConfig:
+        """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""
+        values = self.model_dump()
+        affinity = AffinityConfig(geometric_weight=values.pop("geometric_weight"),
+                                  pose_weight=values.pop("pose_weight"))
+        return TrackingConfig(affinity=affinity, **values)

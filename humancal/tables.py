@@ -12,6 +12,8 @@ Tables:
     intrinsics:   one row per view: the initial intrinsics from upright people, with diagnostics.
     views:        one row per view: name and image size (what a user knows without calibration).
     poses3d:      3D keypoints of people in the world frame, one row per (frame, person_id, joint).
+    skeletons3d:  the people's 3D joints triangulated by the association, one row per (frame, person_id, joint);
+                  ``num_views`` views triangulated the joint (0, NaN coordinates and ``valid`` False where none).
     cameras:      one row per view: pinhole intrinsics, world-to-camera extrinsics, image size.
     associations: person id of each detection (-1 = not a person / not associated).
     people:       per person body-model shape (anny phenotypes) and height.
@@ -121,6 +123,19 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("x_m", pa.float64()),
             ("y_m", pa.float64()),
             ("z_m", pa.float64()),
+            ("valid", pa.bool_()),
+        ]
+    ),
+    "skeletons3d": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("frame", pa.int32()),
+            ("person_id", pa.int32()),
+            ("joint", pa.string()),
+            ("x_m", pa.float64()),
+            ("y_m", pa.float64()),
+            ("z_m", pa.float64()),
+            ("num_views", pa.int32()),
             ("valid", pa.bool_()),
         ]
     ),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dagster as dg
 
+from assets.association import association
 from assets.baselines import gt_camera_triangulation
 from assets.calibration import detections, extrinsics, intrinsics
 from assets.lifter import build_lifter_assets
@@ -19,7 +20,8 @@ from resources.datasets import DatasetsResource
 from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFactory
 from resources.torch import TorchResource
 
-PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, metric_tables]
+PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, association,
+                       metric_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
 SHARED_ASSETS = [sequence_registry, mocap_clips]

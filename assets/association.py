@@ -1,0 +1,68 @@
+"""Per sequence: who is who (the person of every detection, from the calibrated cameras) and the people's 3D
+skeletons, without ground truth (the paper's III-C; ``docs/association.md``)."""
+
+import time
+
+import dagster as dg
+import numpy as np
+import pandas as pd
+import threadpoolctl
+
+from assets.common import UPDATE_CONDITION, table_metadata, table_output
+from assets.partitions import SEQUENCES
+from assets.settings import AssociationSettings
+from humancal.association import associate, to_associations_table, to_skeletons_table
+from humancal.camera import CameraRig
+from humancal.lifter import lifted_from_table
+
+CODE_VERSION = "1"
+
+_OUTPUTS = {
+    "associations": ("associations", "The person id of every detection (-1: rejected as a false positive), matched "
+                                     "across views and tracked over time with the calibrated cameras."),
+    "skeletons3d": ("skeletons3d", "The triangulated 3D joints of every person and frame, in the calibrated "
+                                   "cameras' world frame, metres."),
+}
+
+
+@dg.multi_asset(
+    outs={
+        name: dg.AssetOut(description=desc, metadata=table_metadata(table), code_version=CODE_VERSION,
+                          automation_condition=UPDATE_CONDITION)
+        for name, (table, desc) in _OUTPUTS.items()
+    },
+    partitions_def=SEQUENCES,
+    group_name="sequence",
+)
+def association(context: dg.AssetExecutionContext, config: AssociationSettings, detections: pd.DataFrame,
+                extrinsics: pd.DataFrame):
+    """Affinities of the lifted detections of each frame, cycle-consistent matching across views, tracking over
+    time, triangulation: from the self-calibrated cameras and the detections alone (never ground truth)."""
+    dense, lifted = lifted_from_table(detections)
+    # many small per-frame solves: multi-threaded BLAS only adds overhead (as in the calibration)
+    with threadpoolctl.threadpool_limits(1):
+        result = associate(dense, lifted, CameraRig.from_table(extrinsics), config.to_library())
+    for warning in result.warnings:
+        context.log.warning(warning)
+    sequence = context.partition_key
+    people = to_associations_table(result, sequence)
+    skeletons = to_skeletons_table(result, sequence)
+    seconds = {f"seconds_{stage}": round(float(s), 3) for stage, s in result.stage_seconds.items()}
+    rejected = int((result.person_id < 0).sum())
+    context.log.info(f"{sequence}: {result.num_people} people, {len(people) - rejected} of {len(people)} detections "
+                     f"associated in {result.stage_seconds.get('total', float('nan')):.2f} s")
+    yield table_output(people, "associations", output_name="associations", rows=len(people),
+                       num_people=int(result.num_people), rejected_detections=rejected, **seconds)
+    yield table_output(skeletons, "skeletons3d", output_name="skeletons3d", rows=len(skeletons),
+                       num_people=int(result.num_people), skeletons=int(len(result.skeleton_frame)),
+                       valid_joint_fraction=float(np.mean(skeletons["valid"])) if len(skeletons) else 0.0)
+
+
+def latest_association_seconds(instance: dg.DagsterInstance, partition: str) -> float:
+    """The run time of the latest ``associations`` materialization of a partition, seconds (NaN if unrecorded)."""
+    records = instance.fetch_materializations(
+        dg.AssetRecordsFilter(asset_key=dg.AssetKey("associations"), asset_partitions=[partition]), limit=1).records
+    if not records:
+        return float("nan")
+    value = records[0].asset_materialization.metadata.get("seconds_total")
+    return float(value.value) if value is not None else float("nan")
