@@ -6,8 +6,10 @@ from pathlib import Path
 import dagster as dg
 import pandas as pd
 
+from assets.association import latest_association_seconds
 from assets.checks import latest_check_outcomes
 from assets.common import png_metadata, sequence_asset, table_output
+from evaluation.association_metrics import association_metric_table
 from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
 from evaluation.rig_plot import plot_rig_comparison
@@ -17,7 +19,7 @@ from humancal.tables import empty_table
 from resources.datasets import DatasetsResource
 
 
-@sequence_asset("metrics", code_version="5")
+@sequence_asset("metrics", code_version="6")
 def metric_tables(
     context: dg.AssetExecutionContext,
     datasets: DatasetsResource,
@@ -29,6 +31,8 @@ def metric_tables(
     gt_poses3d: pd.DataFrame,
     gt_associations: pd.DataFrame,
     gt_people: pd.DataFrame,
+    associations: pd.DataFrame,
+    skeletons3d: pd.DataFrame,
 ) -> dg.Output:
     """MPJPE, PCP and reprojection error of each method; the lifter's 3D and height errors; the camera
     initialisation's focal, position, angle and reprojection errors; detection grouping on real datasets.
@@ -54,9 +58,16 @@ def metric_tables(
                                  gt_people),
         ]
     if gt:
+        failed = _failed_camera_checks(context)
         parts.append(camera_metrics_table(spec.dataset, spec.sequence, estimated, gt,
                                           raw_detections if identified else None, gt_associations if identified else None,
-                                          failed_checks=_failed_camera_checks(context)))
+                                          failed_checks=failed))
+        if identified:  # who is who, against the true identities (the association itself never reads them)
+            parts.append(association_metric_table(
+                spec, associations=associations, skeletons3d=skeletons3d,
+                seconds=latest_association_seconds(context.instance, context.partition_key),
+                lifted_detections=detections, cameras=estimated, gt_associations=gt_associations,
+                gt_poses3d=gt_poses3d, gt_cameras=gt, failed_checks=failed))
     else:
         context.log.info(f"{spec.key}: no known cameras: no metric rows (the calibrated cameras are in extrinsics)")
     table = pd.concat(parts, ignore_index=True) if parts else empty_table("metrics")

@@ -1,0 +1,151 @@
+"""Who-is-who figures of an association against the ground-truth identities, and the 3D accuracy of its
+skeletons (the dataset's protocol).
+
+Identity figures (detections meet the ground truth by (frame, view, det_id); a detection the ground truth calls
+``-1`` or does not list is a false positive):
+
+* ``pairwise_precision`` / ``pairwise_recall`` / ``pairwise_f1``: over the pairs of detections of one frame in
+  different views, "same person" as estimated against as true (rejected detections are nobody's).
+* ``id_switches``: per true person and frame, the estimated id holding most of its detections; a switch is a
+  change of that id between consecutive frames the person was found in (summed over people).
+* ``fp_rejection_rate``: percent of the true false positives labelled -1 (NaN where there are none).
+* ``num_people_error``: estimated minus true number of people.
+
+3D figures: each estimated skeleton takes, per frame, the true id of most of its detections (a true person
+claimed twice in a frame keeps the skeleton with more views); the skeletons are brought into the ground-truth
+world by the similarity that aligns the estimated camera centres on the true ones (as the camera metrics do),
+then scored by the dataset's protocol (``mpjpe_mm``, ``pcp_avg``; Shelf: actors 1-3).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+
+from evaluation.protocols import MetricRow, evaluate_canonical_poses, evaluate_shelf_poses, metrics_table
+from humancal.association import AffinityConfig, TrackingConfig, associate, to_associations_table, to_skeletons_table
+from humancal.associations import Associations
+from humancal.calibration.alignment import align_rig
+from humancal.camera import Camera, CameraRig
+from humancal.lifter import lifted_from_table
+from humancal.sequences import SequenceSpec
+
+__all__ = ["identity_metrics", "skeleton_metrics", "association_metric_table"]
+
+_KEYS = ["frame", "view", "det_id"]
+
+
+def _labelled(estimated: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
+    """frame, view, est, true of every estimated detection (true -1 where the ground truth says none)."""
+    true = Associations.from_table(truth).person_of(*(estimated[k].to_numpy() for k in _KEYS))
+    return pd.DataFrame({"frame": estimated["frame"].to_numpy(np.int64), "view": estimated["view"].to_numpy(np.int64),
+                         "est": estimated["person_id"].to_numpy(np.int64), "true": true.astype(np.int64)})
+
+
+def _cross_view_pairs(df: pd.DataFrame, keys: list[str]) -> int:
+    """Pairs of rows in different views within each group of ``keys``."""
+    if df.empty:
+        return 0
+    per_view = df.groupby([*keys, "view"]).size()
+    n = per_view.groupby(level=list(range(len(keys)))).sum()
+    squares = (per_view ** 2).groupby(level=list(range(len(keys)))).sum()
+    return int(((n ** 2 - squares) // 2).sum())
+
+
+def _majority(df: pd.DataFrame, by: list[str], label: str) -> pd.DataFrame:
+    """For each group of ``by``, the value of ``label`` most of its rows hold, with that count (``votes``)."""
+    counts = df.groupby([*by, label]).size().rename("votes").reset_index()
+    return counts.sort_values([*by, "votes", label], ascending=[True] * len(by) + [False, True]).drop_duplicates(by)
+
+
+def identity_metrics(estimated: pd.DataFrame, truth: pd.DataFrame) -> list[MetricRow]:
+    """Pairwise precision/recall/F1, id switches, false-positive rejection and people count error.
+
+    Args:
+        estimated: ``associations`` table of the method.
+        truth: ground-truth ``associations`` table.
+    """
+    d = _labelled(estimated, truth)
+    est, true = d[d["est"] >= 0], d[d["true"] >= 0]
+    predicted = _cross_view_pairs(est, ["frame", "est"])
+    actual = _cross_view_pairs(true, ["frame", "true"])
+    hits = _cross_view_pairs(d[(d["est"] >= 0) & (d["true"] >= 0)], ["frame", "est", "true"])
+    precision = hits / predicted if predicted else float("nan")
+    recall = hits / actual if actual else float("nan")
+    f1 = 2 * hits / (predicted + actual) if predicted + actual else float("nan")
+    found = _majority(d[(d["est"] >= 0) & (d["true"] >= 0)], ["true", "frame"], "est").sort_values(["true", "frame"])
+    same_person = found["true"].to_numpy()[1:] == found["true"].to_numpy()[:-1]
+    switches = int((same_person & (found["est"].to_numpy()[1:] != found["est"].to_numpy()[:-1])).sum())
+    false_positive = d["true"] < 0
+    rejection = 100.0 * float((d.loc[false_positive, "est"] < 0).mean()) if false_positive.any() else float("nan")
+    num_true = int(truth.loc[truth["person_id"] >= 0, "person_id"].nunique())
+    return [
+        MetricRow("pairwise_precision", precision, "ratio"),
+        MetricRow("pairwise_recall", recall, "ratio"),
+        MetricRow("pairwise_f1", f1, "ratio"),
+        MetricRow("id_switches", float(switches), "count"),
+        MetricRow("fp_rejection_rate", rejection, "%"),
+        MetricRow("num_people_error", float(est["est"].nunique() - num_true), "count"),
+    ]
+
+
+def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,
+                     gt_poses3d: pd.DataFrame, cameras: list[Camera], gt_cameras: list[Camera]) -> list[MetricRow]:
+    """``mpjpe_mm`` and ``pcp_avg`` of the skeletons (ids mapped to the true ones per frame, aligned into the
+    ground-truth world by the cameras' similarity), by the dataset's protocol."""
+    d = _labelled(estimated, truth)
+    owner = _majority(d[(d["est"] >= 0) & (d["true"] >= 0)], ["frame", "est"], "true")
+    owner = owner.sort_values(["frame", "true", "votes"], ascending=[True, True, False]).drop_duplicates(["frame", "true"])
+    mapped = skeletons.merge(owner.rename(columns={"est": "person_id", "true": "true_id"})[["frame", "person_id", "true_id"]],
+                             on=["frame", "person_id"], how="inner")
+    xyz = align_rig(cameras, gt_cameras).apply(mapped[["x_m", "y_m", "z_m"]].to_numpy())
+    poses = pd.DataFrame({"sequence": mapped["sequence"], "frame": mapped["frame"].astype(np.int32),
+                          "person_id": mapped["true_id"].astype(np.int32), "joint": mapped["joint"],
+                          "x_m": xyz[:, 0], "y_m": xyz[:, 1], "z_m": xyz[:, 2],
+                          "valid": mapped["valid"].to_numpy(bool) & np.isfinite(xyz).all(1)})
+    poses.loc[~poses["valid"], ["x_m", "y_m", "z_m"]] = 0.0
+    if spec.kind == "shelf":
+        rows = evaluate_shelf_poses(poses, gt_poses3d)
+    elif spec.kind == "synthetic":
+        rows = evaluate_canonical_poses(poses, gt_poses3d)
+    else:
+        raise ValueError(f"sequence {spec.key}: no evaluation protocol for dataset kind {spec.kind!r}")
+    return [r for r in rows if r.metric in ("mpjpe_mm", "pcp_avg")]
+
+
+def association_metric_table(
+    spec: SequenceSpec,
+    *,
+    associations: pd.DataFrame,
+    skeletons3d: pd.DataFrame,
+    seconds: float,
+    lifted_detections: pd.DataFrame,
+    cameras: list[Camera],
+    gt_associations: pd.DataFrame,
+    gt_poses3d: pd.DataFrame,
+    gt_cameras: list[Camera],
+    failed_checks: str | None = None,
+) -> pd.DataFrame:
+    """Rows of method ``association`` (the pipeline's tables) and ``epipolar_only`` (the geometric affinity alone,
+    associated here from the same detections and cameras; it never feeds the pipeline).
+
+    Args:
+        seconds: the pipeline association's run time, seconds (NaN where unknown).
+        failed_checks: the checks the estimated cameras failed (as the camera rows).
+    """
+    parts = []
+    methods = {"association": (associations, skeletons3d, seconds)}
+    dense, lifted = lifted_from_table(lifted_detections)
+    start = time.perf_counter()
+    baseline = associate(dense, lifted, CameraRig.from_cameras(cameras),
+                         TrackingConfig(affinity=AffinityConfig.epipolar_only()))
+    methods["epipolar_only"] = (to_associations_table(baseline, spec.sequence),
+                                to_skeletons_table(baseline, spec.sequence), time.perf_counter() - start)
+    for method, (people, skeletons, s) in methods.items():
+        rows = identity_metrics(people, gt_associations)
+        rows += skeleton_metrics(spec, people, skeletons, gt_associations, gt_poses3d, cameras, gt_cameras)
+        rows.append(MetricRow("seconds", float(s), "s"))
+        parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed_checks))
+    return pd.concat(parts, ignore_index=True)

@@ -1,0 +1,101 @@
+"""The association assets (``associations``, ``skeletons3d``) and their metric rows, run by Dagster on a
+synthetic sequence. To stay fast the calibration is not run: the ``detections`` artifact holds stand-in lifted
+poses (as in ``test_calibration_assets``) and the ``extrinsics`` artifact the true cameras."""
+
+import dagster as dg
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from evaluation.association_metrics import identity_metrics
+from humancal.synthetic import generate_scene, preset
+from humancal.tables import SCHEMAS, to_arrow
+from pipelines.definitions import build_definitions
+from pipelines.partitions import SEQUENCES
+from resources.datasets import DatasetsResource
+from resources.io_managers import partition_path
+from tests.pipelines.test_calibration_assets import SCENE, _stand_in_table
+
+PARTITION = "synthetic__calib"
+ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people",
+          "gt_camera_triangulation", "associations", "skeletons3d", "metric_tables"]
+
+
+def _write(storage, asset, table, name):
+    path = partition_path(storage, asset, PARTITION)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(to_arrow(table, name), str(path))
+
+
+@pytest.fixture(scope="module")
+def materialized(tmp_path_factory, body_model):
+    config = tmp_path_factory.mktemp("config") / "datasets.yaml"
+    options = ", ".join(f"{k}: {v}" for k, v in SCENE.items())
+    config.write_text(f"datasets:\n  synthetic:\n    kind: synthetic\n    sequences:\n      calib: {{{options}}}\n")
+    storage = str(tmp_path_factory.mktemp("artifacts"))
+    defs = build_definitions(storage, datasets=DatasetsResource(config_path=str(config)))
+    scene = generate_scene(preset(SCENE["preset"], **{k: v for k, v in SCENE.items() if k != "preset"}), body_model,
+                           sequence="calib")
+    _write(storage, "detections", _stand_in_table(scene), "lifted_detections")
+    _write(storage, "extrinsics", scene.cameras.assign(sequence=PARTITION), "cameras")
+    with dg.instance_for_test(temp_dir=str(tmp_path_factory.mktemp("home"))) as instance:
+        instance.add_dynamic_partitions(SEQUENCES.name, [PARTITION])
+        result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
+                                selection=dg.AssetSelection.assets(*ASSETS), partition_key=PARTITION,
+                                instance=instance)
+    return result, storage, scene, defs
+
+
+def _read(storage, asset):
+    return pd.read_parquet(str(partition_path(storage, asset, PARTITION)))
+
+
+def test_the_self_calibrated_association_reads_no_ground_truth(materialized):
+    graph = materialized[3].resolve_asset_graph()
+    for key in ("associations", "skeletons3d"):
+        parents = {k.to_user_string() for k in graph.get(dg.AssetKey(key)).parent_keys}
+        assert parents == {"detections", "extrinsics"}, key
+    assert "associations" in {k.to_user_string() for k in graph.asset_keys_for_group("sequence")}
+
+
+def test_association_tables(materialized):
+    result, storage, scene, _ = materialized
+    assert result.success
+    people = _read(storage, "associations")
+    assert list(people.columns) == SCHEMAS["associations"].names
+    assert people.groupby(["frame", "view", "det_id"]).ngroups == len(people) == len(scene.associations)
+    assert people["person_id"].max() + 1 == SCENE["num_people"]
+    skeletons = _read(storage, "skeletons3d")
+    assert list(skeletons.columns) == SCHEMAS["skeletons3d"].names
+    assert skeletons["valid"].mean() > 0.9 and (skeletons.loc[skeletons["valid"], "num_views"] >= 2).all()
+    meta = {e.materialization.asset_key.to_user_string(): e.materialization.metadata
+            for e in result.get_asset_materialization_events()}["associations"]
+    assert meta["num_people"].value == SCENE["num_people"] and meta["rows"].value == len(people)
+    assert 0 < meta["seconds_total"].value < 60 and "seconds_matching" in meta
+
+
+def test_association_metric_rows(materialized):
+    metrics = _read(materialized[1], "metric_tables")
+    for method in ("association", "epipolar_only"):
+        rows = metrics[metrics["method"] == method].set_index("metric")["value"]
+        assert set(rows.index) == {"pairwise_precision", "pairwise_recall", "pairwise_f1", "id_switches",
+                                   "fp_rejection_rate", "num_people_error", "mpjpe_mm", "pcp_avg", "seconds"}, method
+        assert rows["pairwise_f1"] > 0.9 and rows["pairwise_precision"] > 0.9, (method, rows.to_dict())
+        assert rows["num_people_error"] == 0 and rows["id_switches"] <= 2, (method, rows.to_dict())
+        assert rows["mpjpe_mm"] < 100 and rows["pcp_avg"] > 80, (method, rows.to_dict())
+        assert 0 < rows["seconds"] < 60
+
+
+def test_identity_metrics_count_pairs_switches_and_rejections():
+    truth = pd.DataFrame({"sequence": "s", "frame": [0, 0, 0, 0, 1, 1, 1],
+                          "view": [0, 1, 2, 0, 0, 1, 2], "det_id": [0, 0, 0, 1, 0, 0, 0],
+                          "person_id": [0, 0, 0, -1, 0, 0, -1]})
+    # frame 0: person 0 split into {view 0, view 1} + {view 2}; the false positive kept; frame 1: a new id
+    estimated = truth.assign(person_id=[0, 0, 1, 2, 3, 3, -1])
+    rows = {r.metric: r.value for r in identity_metrics(estimated, truth)}
+    # true cross-view pairs: 3 (frame 0) + 1 (frame 1); estimated: 1 + 1, both right
+    assert rows["pairwise_precision"] == 1.0 and rows["pairwise_recall"] == 0.5
+    assert np.isclose(rows["pairwise_f1"], 2 / 3)
+    assert rows["id_switches"] == 1 and rows["fp_rejection_rate"] == 50.0
+    assert rows["num_people_error"] == 3  # ids 0, 1, 2, 3 for one person
