@@ -398,7 +398,10 @@ def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: Tr
             gate = config.assign_distance_m + config.reid_speed_mps * (gap - 1.0) / config.fps
             cost = distance / gate[:, None]
             for i in np.flatnonzero(gap > 1):  # re-identification: the same body
-                body = np.nanmedian(bones[alive[i].rows[-30:]], axis=0)
+                seen = bones[alive[i].rows[-30:]]
+                body = np.full(seen.shape[1:], np.nan)  # a bone never seen stays NaN
+                measured = np.isfinite(seen).any(0)
+                body[measured] = np.nanmedian(seen[:, measured], axis=0)
                 for j in np.flatnonzero(cost[i] <= 1.0):
                     if _bone_mismatch(bones[rows[j]], body) > config.bone_tolerance:
                         cost[i, j] = np.inf
