@@ -11,6 +11,12 @@ Identity figures (detections meet the ground truth by (frame, view, det_id); a d
 * ``fp_rejection_rate``: percent of the true false positives labelled -1 (NaN where there are none).
 * ``num_people_error``: estimated minus true number of people.
 
+Ground truth that names only some of the people (Shelf: actors 1-3 are annotated, in the frames with annotations;
+a fourth person and the unannotated frames are ``-1`` there, which is not "false positive") is *partial*: the
+pairwise figures and the switches then count only detections of annotated people (pairs with an unannotated
+detection are unknown, not wrong), and ``fp_rejection_rate`` and ``num_people_error`` are NaN (the truth does not
+say which detections are false positives, nor how many people there are). Synthetic ground truth is complete.
+
 3D figures: each estimated skeleton takes, per frame, the true id of most of its detections (a true person
 claimed twice in a frame keeps the skeleton with more views); the skeletons are brought into the ground-truth
 world by the similarity that aligns the estimated camera centres on the true ones (as the camera metrics do),
@@ -60,14 +66,17 @@ def _majority(df: pd.DataFrame, by: list[str], label: str) -> pd.DataFrame:
     return counts.sort_values([*by, "votes", label], ascending=[True] * len(by) + [False, True]).drop_duplicates(by)
 
 
-def identity_metrics(estimated: pd.DataFrame, truth: pd.DataFrame) -> list[MetricRow]:
+def identity_metrics(estimated: pd.DataFrame, truth: pd.DataFrame, *, complete: bool = True) -> list[MetricRow]:
     """Pairwise precision/recall/F1, id switches, false-positive rejection and people count error.
 
     Args:
         estimated: ``associations`` table of the method.
         truth: ground-truth ``associations`` table.
+        complete: whether the truth names every person (synthetic) or only some (Shelf: see the module docstring).
     """
     d = _labelled(estimated, truth)
+    if not complete:  # unannotated detections are unknown, not false positives
+        d = d[d["true"] >= 0]
     est, true = d[d["est"] >= 0], d[d["true"] >= 0]
     predicted = _cross_view_pairs(est, ["frame", "est"])
     actual = _cross_view_pairs(true, ["frame", "true"])
@@ -81,13 +90,14 @@ def identity_metrics(estimated: pd.DataFrame, truth: pd.DataFrame) -> list[Metri
     false_positive = d["true"] < 0
     rejection = 100.0 * float((d.loc[false_positive, "est"] < 0).mean()) if false_positive.any() else float("nan")
     num_true = int(truth.loc[truth["person_id"] >= 0, "person_id"].nunique())
+    people_error = float(est["est"].nunique() - num_true) if complete else float("nan")
     return [
         MetricRow("pairwise_precision", precision, "ratio"),
         MetricRow("pairwise_recall", recall, "ratio"),
         MetricRow("pairwise_f1", f1, "ratio"),
         MetricRow("id_switches", float(switches), "count"),
         MetricRow("fp_rejection_rate", rejection, "%"),
-        MetricRow("num_people_error", float(est["est"].nunique() - num_true), "count"),
+        MetricRow("num_people_error", people_error, "count"),
     ]
 
 
@@ -144,7 +154,7 @@ def association_metric_table(
     methods["epipolar_only"] = (to_associations_table(baseline, spec.sequence),
                                 to_skeletons_table(baseline, spec.sequence), time.perf_counter() - start)
     for method, (people, skeletons, s) in methods.items():
-        rows = identity_metrics(people, gt_associations)
+        rows = identity_metrics(people, gt_associations, complete=spec.kind == "synthetic")
         rows += skeleton_metrics(spec, people, skeletons, gt_associations, gt_poses3d, cameras, gt_cameras)
         rows.append(MetricRow("seconds", float(s), "s"))
         parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed_checks))

@@ -99,3 +99,11 @@ def test_identity_metrics_count_pairs_switches_and_rejections():
     assert np.isclose(rows["pairwise_f1"], 2 / 3)
     assert rows["id_switches"] == 1 and rows["fp_rejection_rate"] == 50.0
     assert rows["num_people_error"] == 3  # ids 0, 1, 2, 3 for one person
+
+    # partial truth (Shelf): unannotated detections are unknown, not false positives
+    merged_with_unknown = truth.assign(person_id=[0, 0, 0, -1, 0, 0, -1])
+    estimated = truth.assign(person_id=[0, 0, 0, 0, 1, 1, 1])  # an unannotated detection joins person 0
+    partial = {r.metric: r.value for r in identity_metrics(estimated, merged_with_unknown, complete=False)}
+    complete = {r.metric: r.value for r in identity_metrics(estimated, merged_with_unknown)}
+    assert partial["pairwise_precision"] == 1.0 and complete["pairwise_precision"] < 1.0
+    assert np.isnan(partial["fp_rejection_rate"]) and np.isnan(partial["num_people_error"])
