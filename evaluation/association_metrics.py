@@ -138,24 +138,34 @@ def association_metric_table(
     gt_cameras: list[Camera],
     failed_checks: str | None = None,
 ) -> pd.DataFrame:
-    """Rows of method ``association`` (the pipeline's tables) and ``epipolar_only`` (the geometric affinity alone,
-    associated here from the same detections and cameras; it never feeds the pipeline).
+    """Rows of method ``association`` (the pipeline's tables), ``epipolar_only`` (the geometric affinity alone,
+    associated here from the same detections and cameras; it never feeds the pipeline), and both again with the
+    true cameras (``association_gt_cameras``, ``epipolar_only_gt_cameras``).
 
     Args:
         seconds: the pipeline association's run time, seconds (NaN where unknown).
         failed_checks: the checks the estimated cameras failed (as the camera rows).
     """
     parts = []
-    methods = {"association": (associations, skeletons3d, seconds)}
     dense, lifted = lifted_from_table(lifted_detections)
-    start = time.perf_counter()
-    baseline = associate(dense, lifted, CameraRig.from_cameras(cameras),
-                         TrackingConfig(affinity=AffinityConfig.epipolar_only()))
-    methods["epipolar_only"] = (to_associations_table(baseline, spec.sequence),
-                                to_skeletons_table(baseline, spec.sequence), time.perf_counter() - start)
-    for method, (people, skeletons, s) in methods.items():
+
+    def run(rig_cameras: list[Camera], affinity: AffinityConfig):
+        start = time.perf_counter()
+        result = associate(dense, lifted, CameraRig.from_cameras(rig_cameras), TrackingConfig(affinity=affinity))
+        return (to_associations_table(result, spec.sequence), to_skeletons_table(result, spec.sequence),
+                time.perf_counter() - start)
+
+    # method -> (associations, skeletons, seconds, cameras used, failed checks of those cameras)
+    methods = {
+        "association": (associations, skeletons3d, seconds, cameras, failed_checks),
+        "epipolar_only": (*run(cameras, AffinityConfig.epipolar_only()), cameras, failed_checks),
+        # with the true cameras: what the association gives when the calibration is perfect (evaluation only)
+        "association_gt_cameras": (*run(gt_cameras, AffinityConfig()), gt_cameras, None),
+        "epipolar_only_gt_cameras": (*run(gt_cameras, AffinityConfig.epipolar_only()), gt_cameras, None),
+    }
+    for method, (people, skeletons, s, used, failed) in methods.items():
         rows = identity_metrics(people, gt_associations, complete=spec.kind == "synthetic")
-        rows += skeleton_metrics(spec, people, skeletons, gt_associations, gt_poses3d, cameras, gt_cameras)
+        rows += skeleton_metrics(spec, people, skeletons, gt_associations, gt_poses3d, used, gt_cameras)
         rows.append(MetricRow("seconds", float(s), "s"))
-        parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed_checks))
+        parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed))
     return pd.concat(parts, ignore_index=True)

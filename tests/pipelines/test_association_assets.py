@@ -77,7 +77,7 @@ def test_association_tables(materialized):
 
 def test_association_metric_rows(materialized):
     metrics = _read(materialized[1], "metric_tables")
-    for method in ("association", "epipolar_only"):
+    for method in ("association", "epipolar_only", "association_gt_cameras", "epipolar_only_gt_cameras"):
         rows = metrics[metrics["method"] == method].set_index("metric")["value"]
         assert set(rows.index) == {"pairwise_precision", "pairwise_recall", "pairwise_f1", "id_switches",
                                    "fp_rejection_rate", "num_people_error", "mpjpe_mm", "pcp_avg", "seconds"}, method
@@ -85,6 +85,8 @@ def test_association_metric_rows(materialized):
         assert rows["num_people_error"] == 0 and rows["id_switches"] <= 2, (method, rows.to_dict())
         assert rows["mpjpe_mm"] < 100 and rows["pcp_avg"] > 80, (method, rows.to_dict())
         assert 0 < rows["seconds"] < 60
+    # the ground-truth camera rows are not figures of the estimated cameras: no failed-checks mark
+    assert metrics.loc[metrics["method"] == "association_gt_cameras", "failed_checks"].isna().all()
 
 
 def test_identity_metrics_count_pairs_switches_and_rejections():
