@@ -8,6 +8,8 @@ Identity figures (detections meet the ground truth by (frame, view, det_id); a d
   different views, "same person" as estimated against as true (rejected detections are nobody's).
 * ``id_switches``: per true person and frame, the estimated id holding most of its detections; a switch is a
   change of that id between consecutive frames the person was found in (summed over people).
+* ``idf1``: the identity F1 of multi-target tracking (estimated ids matched one-to-one to true ids over the whole
+  sequence so as to agree on the most detections; ``2 IDTP / (2 IDTP + IDFP + IDFN)`` over detections).
 * ``fp_rejection_rate``: percent of the true false positives labelled -1 (NaN where there are none).
 * ``num_people_error``: estimated minus true number of people.
 
@@ -29,6 +31,7 @@ import time
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import linear_sum_assignment
 
 from evaluation.protocols import MetricRow, evaluate_canonical_poses, evaluate_shelf_poses, metrics_table
 from humancal.association import AffinityConfig, TrackingConfig, associate, to_associations_table, to_skeletons_table
@@ -91,14 +94,30 @@ def identity_metrics(estimated: pd.DataFrame, truth: pd.DataFrame, *, complete: 
     rejection = 100.0 * float((d.loc[false_positive, "est"] < 0).mean()) if false_positive.any() else float("nan")
     num_true = int(truth.loc[truth["person_id"] >= 0, "person_id"].nunique())
     people_error = float(est["est"].nunique() - num_true) if complete else float("nan")
+    idf1 = _idf1(d)
     return [
         MetricRow("pairwise_precision", precision, "ratio"),
         MetricRow("pairwise_recall", recall, "ratio"),
         MetricRow("pairwise_f1", f1, "ratio"),
         MetricRow("id_switches", float(switches), "count"),
+        MetricRow("idf1", idf1, "ratio"),
         MetricRow("fp_rejection_rate", rejection, "%"),
         MetricRow("num_people_error", people_error, "count"),
     ]
+
+
+def _idf1(d: pd.DataFrame) -> float:
+    """Identity F1 of labelled detections ``d`` (columns ``est``, ``true``; -1: none)."""
+    both = d[(d["est"] >= 0) & (d["true"] >= 0)]
+    n_est, n_true = int((d["est"] >= 0).sum()), int((d["true"] >= 0).sum())
+    if n_est + n_true == 0:
+        return float("nan")
+    if both.empty:
+        return 0.0
+    counts = both.groupby(["est", "true"]).size().unstack(fill_value=0)
+    rows, cols = linear_sum_assignment(-counts.to_numpy())
+    idtp = int(counts.to_numpy()[rows, cols].sum())
+    return 2.0 * idtp / (n_est + n_true)  # 2 IDTP / (2 IDTP + IDFP + IDFN), IDFP = n_est - IDTP, IDFN = n_true - IDTP
 
 
 def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,

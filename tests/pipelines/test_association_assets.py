@@ -79,7 +79,7 @@ def test_association_metric_rows(materialized):
     metrics = _read(materialized[1], "metric_tables")
     for method in ("association", "epipolar_only", "association_gt_cameras", "epipolar_only_gt_cameras"):
         rows = metrics[metrics["method"] == method].set_index("metric")["value"]
-        assert set(rows.index) == {"pairwise_precision", "pairwise_recall", "pairwise_f1", "id_switches",
+        assert set(rows.index) == {"pairwise_precision", "pairwise_recall", "pairwise_f1", "id_switches", "idf1",
                                    "fp_rejection_rate", "num_people_error", "mpjpe_mm", "pcp_avg", "seconds"}, method
         assert rows["pairwise_f1"] > 0.9 and rows["pairwise_precision"] > 0.9, (method, rows.to_dict())
         assert rows["num_people_error"] == 0 and rows["id_switches"] <= 2, (method, rows.to_dict())
@@ -100,6 +100,8 @@ def test_identity_metrics_count_pairs_switches_and_rejections():
     assert rows["pairwise_precision"] == 1.0 and rows["pairwise_recall"] == 0.5
     assert np.isclose(rows["pairwise_f1"], 2 / 3)
     assert rows["id_switches"] == 1 and rows["fp_rejection_rate"] == 50.0
+    # ids 0 and 3 both hold 2 of person 0's 5 detections: one of them maps to it (IDTP 2); 6 estimated, 5 true
+    assert np.isclose(rows["idf1"], 2 * 2 / (6 + 5))
     assert rows["num_people_error"] == 3  # ids 0, 1, 2, 3 for one person
 
     # partial truth (Shelf): unannotated detections are unknown, not false positives
