@@ -126,19 +126,6 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("valid", pa.bool_()),
         ]
     ),
-    "skeletons3d": pa.schema(
-        [
-            ("sequence", pa.string()),
-            ("frame", pa.int32()),
-            ("person_id", pa.int32()),
-            ("joint", pa.string()),
-            ("x_m", pa.float64()),
-            ("y_m", pa.float64()),
-            ("z_m", pa.float64()),
-            ("num_views", pa.int32()),
-            ("valid", pa.bool_()),
-        ]
-    ),
     "cameras": pa.schema(
         [
             ("sequence", pa.string()),
@@ -201,6 +188,10 @@ SCHEMAS: dict[str, pa.Schema] = {
     ),
 }
 """The declared schema of every canonical table, by table name."""
+
+# the 3D skeletons of the association: the columns of poses3d plus the views that triangulated each joint
+SCHEMAS["skeletons3d"] = SCHEMAS["poses3d"].insert(SCHEMAS["poses3d"].get_field_index("valid"),
+                                                   pa.field("num_views", pa.int32()))
 
 NULLABLE_COLUMNS: dict[str, frozenset[str]] = {"metrics": frozenset({"view", "failed_checks"})}
 """Columns that may hold nulls (every other column of every table must be filled), by table name. In pandas a

@@ -43,7 +43,7 @@ from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, LIMB_INDEX, NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
-from humancal.tables import validate_table
+from humancal.tables import SCHEMAS, validate_table
 
 __all__ = [
     "SKELETONS3D_SCHEMA",
@@ -65,22 +65,10 @@ track to be compared with it."""
 _PREDICTION_FRAMES = 5
 """A lost track's skeleton is extrapolated by its velocity for at most this many frames (people stop)."""
 
-SKELETONS3D_SCHEMA = pa.schema(
-    [
-        ("sequence", pa.string()),
-        ("frame", pa.int32()),
-        ("person_id", pa.int32()),
-        ("joint", pa.string()),
-        ("x_m", pa.float64()),
-        ("y_m", pa.float64()),
-        ("z_m", pa.float64()),
-        ("num_views", pa.int32()),
-        ("valid", pa.bool_()),
-    ]
-)
-"""Proposed ``skeletons3d`` table: the triangulated 3D joints of every person and frame, world metres, one row per
-(frame, person_id, joint); ``num_views`` views triangulated the joint (0 and NaN coordinates where none could:
-``valid`` False). The columns of ``poses3d`` plus ``num_views``."""
+SKELETONS3D_SCHEMA = SCHEMAS["skeletons3d"]
+"""The ``skeletons3d`` table (registered in :mod:`humancal.tables`): the triangulated 3D joints of every person
+and frame, world metres, one row per (frame, person_id, joint); ``num_views`` views triangulated the joint (0 and
+NaN coordinates where none could: ``valid`` False)."""
 
 
 @dataclass(frozen=True)
