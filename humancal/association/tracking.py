@@ -31,13 +31,13 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 from scipy.optimize import linear_sum_assignment
 
 from humancal.association.affinity import AffinityConfig, detection_track_affinity, pair_affinities
+from humancal.association.cluster_triangulation import triangulate_clusters, undistorted_keypoints_px
 from humancal.association.cycle_matching import MatchingConfig, match_frames
 from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
@@ -193,102 +193,6 @@ def _check_inputs(detections: DenseDetections, lifted: LiftedPoses | None, rig: 
                          "needs detections in at least 2 views")
     missing = sorted(set(range(len(rig))) - set(seen.tolist()))
     return [f"view {v} has no detections" for v in missing]
-
-
-def _undistorted_px(detections: DenseDetections, rig: CameraRig) -> np.ndarray:
-    """(D, 23, 2) keypoints with the lens distortion undone (pixels of the ideal pinhole with the same K)."""
-    kp = np.asarray(detections.keypoints_px, dtype=np.float64).copy()
-    for v in np.flatnonzero(np.abs(rig.distortion).sum(1) > 0):
-        rows = np.flatnonzero(detections.view == v)
-        pts = kp[rows].reshape(-1, 1, 2)
-        ok = np.isfinite(pts).all(-1)[:, 0]
-        if ok.any():
-            pts[ok] = cv2.undistortPoints(pts[ok], rig.K[v], rig.distortion[v], P=rig.K[v])
-        kp[rows] = pts.reshape(len(rows), NUM_JOINTS, 2)
-    return kp
-
-
-def _linear_points(cameras: list, points_px: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The confidence-weighted DLT of :func:`~humancal.geometry.triangulation.triangulate_dlt` (same rows, same
-    weights) with the homogeneous coordinate fixed to 1: (N, 3) points from (N, 3, 3) normal equations solved in
-    closed form (no per-point decomposition), and (N, 2V) reprojection errors as (V, N) pixels.
-
-    Args:
-        cameras: V pinhole cameras (no distortion).
-        points_px: (V, N, 2) pixels (any value where the weight is 0).
-        weights: (V, N) confidences, 0 where missing.
-
-    Returns:
-        points_world_m: (N, 3), NaN with fewer than 2 views or a singular system; errors_px: (V, N), NaN where
-        missing.
-    """
-    V, N = weights.shape
-    K = np.stack([c.K for c in cameras])
-    K_inv = np.linalg.inv(K)
-    Rt = np.stack([np.hstack([c.R_cam_from_world, c.t_cam_from_world_m[:, None]]) for c in cameras])  # (V, 3, 4)
-    u, v = np.nan_to_num(points_px[..., 0]), np.nan_to_num(points_px[..., 1])
-    x = K_inv[:, None, 0, 0] * u + K_inv[:, None, 0, 1] * v + K_inv[:, None, 0, 2]
-    y = K_inv[:, None, 1, 1] * v + K_inv[:, None, 1, 2]
-    # The DLT rows of a view, w (x P2 - P0) and w (y P2 - P1) with P = [R | t], summed as outer products:
-    # w^2 ((x^2 + y^2) P2 P2^T - x (P2 P0^T + P0 P2^T) - y (P2 P1^T + P1 P2^T) + P0 P0^T + P1 P1^T);
-    # the four coefficients of every point and view times the views' constant 4x4 terms: one matrix product.
-    w2 = weights * weights
-    coef = np.stack([w2 * (x * x + y * y), -w2 * x, -w2 * y, w2], -1)  # (V, N, 4)
-    P0, P1, P2 = Rt[:, 0], Rt[:, 1], Rt[:, 2]
-    outer = lambda a, b: a[:, :, None] * b[:, None, :]  # noqa: E731
-    basis = np.stack([outer(P2, P2), outer(P2, P0) + outer(P0, P2), outer(P2, P1) + outer(P1, P2),
-                      outer(P0, P0) + outer(P1, P1)], 1)  # (V, 4, 4, 4)
-    M = (coef.transpose(1, 0, 2).reshape(N, 4 * V) @ basis.reshape(4 * V, 16)).reshape(N, 4, 4)
-    A, b = M[:, :3, :3], -M[:, :3, 3]
-    cof = np.stack([np.cross(A[:, 1], A[:, 2]), np.cross(A[:, 2], A[:, 0]), np.cross(A[:, 0], A[:, 1])], 1)
-    det = np.einsum("ni,ni->n", A[:, 0], cof[:, 0])
-    scale = np.abs(A).max((1, 2))
-    ok = ((weights > 0).sum(0) >= 2) & (np.abs(det) > 1e-12 * np.maximum(scale, 1e-300) ** 3)
-    X = np.full((N, 3), np.nan)
-    X[ok] = (cof[ok] * b[ok, :, None]).sum(1) / det[ok, None]
-    # Reprojection errors, on a NaN-free copy (NaN slows the products down; those points are masked after).
-    cam = np.swapaxes(Rt[:, :, :3] @ np.where(ok[:, None], X, 0.0).T, 1, 2) + Rt[:, None, :, 3]  # (V, N, 3)
-    depth = cam[..., 2]
-    front = depth > 0
-    safe = np.where(front, depth, 1.0)
-    xc, yc = cam[..., 0] / safe, cam[..., 1] / safe
-    du = K[:, None, 0, 0] * xc + K[:, None, 0, 1] * yc + K[:, None, 0, 2] - np.nan_to_num(points_px[..., 0])
-    dv = K[:, None, 1, 1] * yc + K[:, None, 1, 2] - np.nan_to_num(points_px[..., 1])
-    errors = np.where(front, np.sqrt(du * du + dv * dv), np.inf)
-    errors[(weights <= 0) | ~ok[None]] = np.nan
-    return X, errors
-
-
-def _triangulate(cluster: np.ndarray, n_clusters: int, view: np.ndarray, keypoints_px: np.ndarray,
-                 scores: np.ndarray, cameras: list, threshold_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """(C, 23, 3) joints and (C, 23) views used of clusters 0..C-1 (``cluster``: (D,) global cluster or -1).
-
-    The rule of :func:`~humancal.geometry.triangulation.triangulate_dlt` (confidence-weighted DLT rows; while a
-    joint's worst view reprojects farther than ``threshold_px`` and more than 2 views remain, that view is dropped
-    and the joint solved again), with the closed-form solve of :func:`_linear_points` (the SVD per point and the
-    reprojection through the generic projection cost ~10x more on the benchmark workload).
-    """
-    if n_clusters == 0:
-        return np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS), np.int64)
-    V = len(cameras)
-    points = np.full((V, n_clusters, NUM_JOINTS, 2), np.nan)
-    weights = np.zeros((V, n_clusters, NUM_JOINTS))
-    m = cluster >= 0
-    points[view[m], cluster[m]] = keypoints_px[m]
-    weights[view[m], cluster[m]] = scores[m]
-    points, weights = points.reshape(V, -1, 2), weights.reshape(V, -1)
-    X, errors = _linear_points(cameras, points, weights)
-    redo = np.arange(X.shape[0])
-    for _ in range(V - 2):
-        worst = np.where(np.isnan(errors), -np.inf, errors)
-        bad = (worst.max(0) > threshold_px) & ((weights[:, redo] > 0).sum(0) > 2)
-        if not bad.any():
-            break
-        redo, errors = redo[bad], errors[:, bad]
-        weights[np.argmax(np.where(np.isnan(errors), -np.inf, errors), 0), redo] = 0.0
-        X[redo], errors = _linear_points(cameras, points[:, redo], weights[:, redo])
-    used = np.where(np.isfinite(X).all(-1), (weights > 0).sum(0), 0)
-    return X.reshape(n_clusters, NUM_JOINTS, 3), used.reshape(n_clusters, NUM_JOINTS).astype(np.int64)
 
 
 def _global_clusters(matchings, frame_start: np.ndarray, D: int) -> tuple[np.ndarray, np.ndarray]:
@@ -511,12 +415,12 @@ def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: Came
 
     t0 = time.perf_counter()
     cameras = [replace(c, distortion=np.zeros(5)) for c in rig.to_cameras()]
-    keypoints = _undistorted_px(dense, rig)
+    keypoints = undistorted_keypoints_px(dense, rig)
     scores = np.where(np.isfinite(keypoints).all(-1), dense.scores, 0.0)
 
     def triangulated(matchings):
         cluster, cluster_frame = _global_clusters(matchings, pairs.frame_start, len(dense))
-        joints, used = _triangulate(cluster, len(cluster_frame), dense.view, keypoints, scores, cameras,
+        joints, used = triangulate_clusters(cluster, len(cluster_frame), dense.view, keypoints, scores, cameras,
                                     config.outlier_threshold_px)
         views_per_cluster = np.bincount(cluster[cluster >= 0], minlength=len(cluster_frame))
         return cluster, pairs.frames[cluster_frame], joints, used, views_per_cluster

@@ -9,7 +9,7 @@ import pytest
 
 from humancal.association import SKELETONS3D_SCHEMA, TrackingConfig, associate, to_associations_table
 from humancal.association import to_skeletons_table
-from humancal.association.tracking import _triangulate
+from humancal.association.cluster_triangulation import triangulate_clusters
 from humancal.camera import Camera, CameraRig
 from humancal.detections import DenseDetections
 from humancal.geometry.triangulation import triangulate_dlt
@@ -211,7 +211,7 @@ def test_triangulation_agrees_with_triangulate_dlt():
     cluster = np.tile(np.arange(C), 5)
     keypoints = pixels.reshape(5, C, NUM_JOINTS, 2).reshape(5 * C, NUM_JOINTS, 2)
     weights = scores.reshape(5 * C, NUM_JOINTS)
-    X, used = _triangulate(cluster, C, view, keypoints, weights, cameras, 25.0)
+    X, used = triangulate_clusters(cluster, C, view, keypoints, weights, cameras, 25.0)
     ref, ref_used = triangulate_dlt(cameras, pixels, scores, min_views=2, outlier_threshold_px=25.0)
     ref = ref.reshape(C, NUM_JOINTS, 3)
     both = np.isfinite(ref).all(-1)
