@@ -25,6 +25,7 @@ __all__ = [
     "IMAGE_SIZE_LIMITS_PX",
     "K1_LIMITS",
     "PITCH_LIMITS_DEG",
+    "OUT_OF_VIEW_DURATION_S",
 ]
 
 RigKind = Literal["ring", "arc", "h36m"]
@@ -44,6 +45,8 @@ K1_LIMITS = (-0.5, 0.5)
 """Allowed radial distortion coefficient k1 (OpenCV model, normalised image coordinates)."""
 PITCH_LIMITS_DEG = (0.0, 75.0)
 """Allowed angle of a camera's optical axis below the horizon, degrees (``camera_pitch_range_deg``)."""
+OUT_OF_VIEW_DURATION_S = (1.0, 4.0)
+"""How long a person stays out of every view in one spell (``out_of_view_spells``), seconds (uniform)."""
 _AREA_PER_PERSON_M2 = 2.0
 """Floor area each person needs to walk about without constant collisions, square metres."""
 
@@ -209,6 +212,11 @@ class SceneConfig:
         distortion_k1_range: (min, max) radial distortion k1 of the lenses, within [-0.5, 0.5]; each camera
             draws its k1 uniformly (stored in ``Camera.distortion``, the detections are projected through
             it). (0, 0), the default, gives ideal pinholes.
+        out_of_view_spells: mean number of spells per person (Poisson) in which the person is out of every
+            camera's view (gone through a door, behind a wall), each lasting ``OUT_OF_VIEW_DURATION_S``; no view
+            detects the person then, and the person comes back wherever the motion has meanwhile taken them. A
+            spell may overlap the start or the end (someone who enters late or leaves early). In [0, 5]; 0, the
+            default, keeps everyone in the capture all along.
     """
 
     num_people: int = 4
@@ -229,6 +237,7 @@ class SceneConfig:
     behaviour: Behaviour = "mixed"
     distortion_k1_range: tuple[float, float] = (0.0, 0.0)
     camera_pitch_range_deg: tuple[float, float] | None = None
+    out_of_view_spells: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "SceneConfig"
@@ -273,6 +282,7 @@ class SceneConfig:
             )
         cam_h = _check_interval(owner, "camera_height_range_m", self.camera_height_range_m, 0.3, 10.0)
         _check_range(owner, "area_fill", self.area_fill, 0.3, 1.2)
+        _check_range(owner, "out_of_view_spells", self.out_of_view_spells, 0.0, 5.0)
         _check_range(owner, "arc_span_deg", self.arc_span_deg, 30.0, 330.0)
         heights = _check_interval(owner, "height_range_m", self.height_range_m, 1.4, 2.0)
         if not isinstance(self.noise, DetectorNoise):

@@ -16,7 +16,8 @@ Per view, for every person and frame (all vectorised with numpy; the only loop i
 
 Then false positives are added per view and frame (Poisson): a real pose from elsewhere in the scene,
 placed at a random image position and depth (a reflection, a poster, a passer-by), whole or only one body
-part. Every random number comes from the one generator passed in, in a fixed order.
+part. Every random number comes from the one generator passed in, in a fixed order. A person out of the
+capture (``hidden``: the scene's ``out_of_view_spells``) is in no image: nobody detects or is occluded by them.
 """
 
 from __future__ import annotations
@@ -183,11 +184,14 @@ def _view_detections(
     camera: Camera,
     noise: DetectorNoise,
     rng: np.random.Generator,
+    hidden: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Detections of the real people in one view (see the module docstring, steps 1-7)."""
     num_people, num_frames = keypoints_world_m.shape[:2]
     pixels, depth = project_points(camera, keypoints_world_m)
     in_front = (np.nan_to_num(depth, nan=-1.0) > 0.05) & _within_lens(camera, keypoints_world_m)
+    if hidden is not None:
+        in_front &= ~hidden[..., None]
     pixels = np.where(in_front[..., None], pixels, np.nan)
     in_image = in_front & _inside(pixels, camera.width_px, camera.height_px)
     pelvis_depth = np.maximum(depth[..., _HIPS].mean(axis=-1), 0.1)
@@ -318,6 +322,7 @@ def simulate_detections(
     cameras: list[Camera],
     noise: DetectorNoise,
     rng: np.random.Generator,
+    hidden: np.ndarray | None = None,
 ) -> DetectorOutput:
     """Run the simulated detector over every view and frame.
 
@@ -327,6 +332,8 @@ def simulate_detections(
         cameras: the V cameras.
         noise: the detector model.
         rng: source of randomness.
+        hidden: optional (P, F) bool, True where a person is out of every view (seen by no camera, occluding
+            nobody); the random draws are the same with or without it.
 
     Returns:
         The :class:`DetectorOutput`; detections ordered by frame, then view, then person (false positives
@@ -342,9 +349,14 @@ def simulate_detections(
             f"keypoints_world_m must be (P, F, {NUM_JOINTS}, 3) and height_m (P,), "
             f"got {keypoints.shape} and {height.shape}"
         )
+    if hidden is not None:
+        hidden = np.asarray(hidden)
+        if hidden.dtype != bool or hidden.shape != keypoints.shape[:2]:
+            raise ValueError(f"hidden must be a (P, F) = {keypoints.shape[:2]} bool array, "
+                             f"got {hidden.dtype} {hidden.shape}")
     per_view = []
     for v, camera in enumerate(cameras):
-        out = _view_detections(keypoints, height, camera, noise, rng)
+        out = _view_detections(keypoints, height, camera, noise, rng, hidden)
         out["view"] = np.full(len(out["frame"]), v)
         per_view.append(out)
     fp = _false_positives(keypoints, height, cameras, noise, rng)

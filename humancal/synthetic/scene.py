@@ -19,7 +19,7 @@ import torch
 from humancal.body import PHENOTYPE_NAMES, BodyModel
 from humancal.camera import Camera, cameras_to_table
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
-from humancal.synthetic.config import SceneConfig
+from humancal.synthetic.config import OUT_OF_VIEW_DURATION_S, SceneConfig
 from humancal.synthetic.motions import Motions, generate_motions
 from humancal.synthetic.noise import DetectorOutput, simulate_detections
 from humancal.synthetic.people import People, sample_people
@@ -107,6 +107,21 @@ class SyntheticScene:
             "flip_fraction": float(d.flipped[true_dets].mean()) if true_dets.any() else float("nan"),
             "mean_score": float(self.detections["score"].mean()) if len(self.detections) else float("nan"),
         }
+
+
+def _out_of_view(config: SceneConfig, rng: np.random.Generator) -> np.ndarray | None:
+    """(P, F) True where a person is out of every view (``config.out_of_view_spells``), or None for none."""
+    if config.out_of_view_spells <= 0:
+        return None
+    hidden = np.zeros((config.num_people, config.num_frames), dtype=bool)
+    counts = rng.poisson(config.out_of_view_spells, config.num_people)
+    for person, count in enumerate(counts):
+        duration = np.round(rng.uniform(*OUT_OF_VIEW_DURATION_S, count) * config.fps).astype(int)
+        # a spell may start before the first frame or end after the last (entering late, leaving early)
+        start = rng.integers(-duration // 2, config.num_frames - duration // 2)
+        for first, length in zip(start, duration):
+            hidden[person, max(first, 0):max(first + length, 0)] = True
+    return hidden
 
 
 def _assign_det_ids(frame: np.ndarray, view: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -231,7 +246,8 @@ def generate_scene(
     if not isinstance(sequence, str) or not sequence:
         raise ValueError(f"sequence must be a non-empty string, got {sequence!r}")
     report = progress or (lambda stage, fraction: None)
-    rng_people, rng_motion, rng_rig, rng_noise, rng_ids = np.random.default_rng(config.seed).spawn(5)
+    # a sixth stream for the out-of-view spells leaves the first five (and older scenes) as they were
+    rng_people, rng_motion, rng_rig, rng_noise, rng_ids, rng_absence = np.random.default_rng(config.seed).spawn(6)
     started = time.perf_counter()
 
     people = sample_people(body, config.num_people, rng_people, config.height_range_m)
@@ -244,7 +260,8 @@ def generate_scene(
     report("motions", 0.4)
     rig = make_rig(config, rng_rig)
     report("cameras", 0.45)
-    detector = simulate_detections(motions.keypoints_world_m, people.height_m, rig, config.noise, rng_noise)
+    hidden = _out_of_view(config, rng_absence)
+    detector = simulate_detections(motions.keypoints_world_m, people.height_m, rig, config.noise, rng_noise, hidden)
     det_id = _assign_det_ids(detector.frame, detector.view, rng_ids)
     report("detections", 0.8)
 
