@@ -226,7 +226,8 @@ def corrupt_keypoints_3d(keypoints_m: Tensor, generator: torch.Generator, noise_
     """
     noise = torch.randn(keypoints_m.shape, generator=generator, dtype=keypoints_m.dtype) * noise_m
     visible = torch.rand(keypoints_m.shape[:-1], generator=generator) >= missing
-    return KeypointObservations(keypoints_m + noise.to(keypoints_m.device), visible.to(keypoints_m.device), noise_m)
+    scale = noise_m if noise_m > 0 else 0.01  # the data term's unit; noise-free data gets 1 cm
+    return KeypointObservations(keypoints_m + noise.to(keypoints_m.device), visible.to(keypoints_m.device), scale)
 
 
 def virtual_cameras(views: int = VIRTUAL_RIG["views"], distance_m: float = VIRTUAL_RIG["distance_m"],
@@ -268,7 +269,8 @@ def corrupt_keypoints_2d(keypoints_m: Tensor, cameras: Sequence[Camera], generat
     noise = torch.randn(pixels.shape, generator=generator, dtype=pixels.dtype).to(pixels.device) * noise_px
     visible = (torch.rand(pixels.shape[:-1], generator=generator) >= missing).to(pixels.device)
     visible = visible & in_front.reshape(V, P, T, J)
-    return KeypointObservations(pixels + noise, visible, noise_px, tuple(cameras))
+    scale = noise_px if noise_px > 0 else 1.0  # the data term's unit; noise-free data gets 1 px
+    return KeypointObservations(pixels + noise, visible, scale, tuple(cameras))
 
 
 # ---------------------------------------------------------------------------------------------------- benchmark
