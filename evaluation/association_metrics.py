@@ -41,7 +41,7 @@ from humancal.camera import Camera, CameraRig
 from humancal.lifter import lifted_from_table
 from humancal.sequences import SequenceSpec
 
-__all__ = ["identity_metrics", "skeleton_metrics", "association_metric_table"]
+__all__ = ["identity_metrics", "identity_confusion", "skeleton_metrics", "association_metric_table"]
 
 _KEYS = ["frame", "view", "det_id"]
 
@@ -104,6 +104,19 @@ def identity_metrics(estimated: pd.DataFrame, truth: pd.DataFrame, *, complete: 
         MetricRow("fp_rejection_rate", rejection, "%"),
         MetricRow("num_people_error", people_error, "count"),
     ]
+
+
+def identity_confusion(estimated: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
+    """Detections per (true person, estimated id): what merged (an id holding several people) or split (a person
+    under several ids). Columns ``true``, ``est`` (-1: a false positive, a rejected detection) and ``detections``,
+    largest first.
+
+    Args:
+        estimated: ``associations`` table of the method.
+        truth: ground-truth ``associations`` table.
+    """
+    counts = _labelled(estimated, truth).groupby(["true", "est"]).size().rename("detections").reset_index()
+    return counts.sort_values("detections", ascending=False, ignore_index=True)
 
 
 def _idf1(d: pd.DataFrame) -> float:
