@@ -80,17 +80,17 @@ class PriorConfig:
 
     variant: str = "motion_prior"
     latent_dim: int = 32
-    hidden_size: int = 256
+    hidden_size: int = 128
     head_width: int = 256
     clip_frames: int = 16
-    epochs: int = 30
+    epochs: int = 20
     steps_per_epoch: int = 200
     batch_size: int = 128
     learning_rate: float = 2e-3
     final_lr_factor: float = 0.02
     weight_decay: float = 1e-5
     weight_6d: float = 1.0
-    weight_keypoints: float = 20.0
+    weight_keypoints: float = 100.0
     weight_kl: float = 1e-3
     kl_anneal_epochs: int = 5
     weight_local_linear: float = 0.1
