@@ -10,10 +10,13 @@ from assets.calibration import detections, extrinsics, intrinsics
 from assets.lifter import build_lifter_assets
 from assets.metric_tables import metric_tables
 from assets.mocap import mocap_clips
+from assets.motion_prior import PriorEvaluationSettings, build_motion_prior_assets
 from assets.registry import sequence_registry
 from assets.sequence_inputs import sequence_inputs
 from humancal.lifter import LifterConfig
+from humancal.prior import PriorConfig
 from humancal.settings import state_dir
+from pipelines.prior_automation import build_mocap_change_sensor, build_weekly_prior_schedule, prior_training_job
 from pipelines.sensors import capture_inbox
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
@@ -37,6 +40,8 @@ def build_definitions(
     storage_root: str | None = None,
     lifter_config: LifterConfig | None = None,
     datasets: DatasetsResource | None = None,
+    prior_configs: dict[str, PriorConfig] | None = None,
+    prior_evaluation: PriorEvaluationSettings | None = None,
 ) -> dg.Definitions:
     """Definitions with artifacts under ``storage_root`` (default: :func:`artifacts_root`).
 
@@ -45,6 +50,9 @@ def build_definitions(
         lifter_config: training configuration of ``lifter_trained`` (default :meth:`LifterConfig.default`, the
             configuration of the shipped weights; tests use a small one).
         datasets: the datasets resource (default: the packaged config and ``HUMANCAL_DATA_DIR``).
+        prior_configs: training configuration of ``motion_prior_checkpoint`` by variant (default: each variant's
+            :meth:`PriorConfig.default`; tests use tiny ones).
+        prior_evaluation: size of the held-out benchmark of ``prior_metrics`` (tests use a small one).
     """
     root = storage_root or artifacts_root()
     lifter_assets = build_lifter_assets(lifter_config or LifterConfig.default(), root)
@@ -52,12 +60,15 @@ def build_definitions(
         "lifter_training_job", selection=dg.AssetSelection.assets("mocap_clips", "lifter_trained"),
         description="Retarget the CMU mocap of the data root and train the lifter on it (it then replaces the "
                     "shipped weights; `humancal update` re-lifts every sequence with it).")
+    prior_assets = build_motion_prior_assets(prior_configs, prior_evaluation)
+    prior_training = prior_training_job()
     return dg.Definitions(
-        assets=[*SHARED_ASSETS, *lifter_assets, *PER_SEQUENCE_ASSETS],
+        assets=[*SHARED_ASSETS, *lifter_assets, *prior_assets, *PER_SEQUENCE_ASSETS],
         jobs=[
             dg.define_asset_job("sequence_job", selection=dg.AssetSelection.groups("sequence"),
                                 description="Every per-sequence asset of one partition."),
             lifter_training,
+            prior_training,
         ],
         schedules=[
             dg.ScheduleDefinition(
@@ -65,8 +76,9 @@ def build_definitions(
                 default_status=dg.DefaultScheduleStatus.STOPPED,
                 description="Sundays 03:00: retrain the lifter on the mocap under the data root (turn on in the UI).",
             ),
+            build_weekly_prior_schedule(prior_training),
         ],
-        sensors=[capture_inbox],
+        sensors=[capture_inbox, build_mocap_change_sensor(prior_training)],
         resources={
             "io_manager": ParquetIOManagerFactory(base_path=root),
             "checkpoint_io_manager": CheckpointIOManagerFactory(base_path=root),

@@ -298,7 +298,9 @@ class _Update:
     def scope(self) -> list[AssetPartition]:
         """The asset partitions this update may compute (on-request and excluded assets are not among them)."""
         graph = self.graph
-        partitioned = [k for k in graph.specs if graph.partitioned(k)]
+        # Partitioned by sequence: assets computed on request only (the motion prior, partitioned by variant) are
+        # never in scope and tie nothing (the mocap they train on is not a sequence's input).
+        partitioned = [k for k in graph.specs if graph.partitioned(k) and not graph.on_request(k)]
         # Under --partition, only the unpartitioned assets tied to partitioned ones: their shared inputs (the
         # lifter checkpoint) and what reads them (fan-in).
         tied = graph.with_ancestors(partitioned) | graph.with_descendants(partitioned)

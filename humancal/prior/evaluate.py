@@ -42,6 +42,7 @@ from humancal.retarget import RetargetedClip
 from humancal.synthetic.rigs import look_at
 
 __all__ = [
+    "DENOISE_FIT_CONFIGS",
     "DENOISE_MISSING",
     "DENOISE_NOISE_M",
     "DENOISE_NOISE_PX",
@@ -65,6 +66,15 @@ DENOISE_MISSING = 0.2
 """Share of keypoints removed (per frame and keypoint; in 2D per view as well)."""
 DENOISE_NOISE_PX = 5.0
 """Standard deviation of the 2D keypoint noise, pixels per coordinate: 30 mm at the virtual cameras' 6 m."""
+_PRIOR_FIT = FitConfig(iterations=300, learning_rate=0.05, weight_latent=1e-3, weight_local_linear=1.0)
+DENOISE_FIT_CONFIGS: dict[str, FitConfig] = {
+    "denoise_no_prior": FitConfig(iterations=300, learning_rate=0.05, weight_rest=1e-4),
+    **{denoise_method_name: _PRIOR_FIT for denoise_method_name in (
+        "denoise_prior", "denoise_per_frame_prior", "denoise_prior/unidirectional", "denoise_prior/no_skip",
+        "denoise_prior/no_local_linear")},
+}
+"""Fit configuration of each benchmark method, chosen on segments of training subjects (``scripts/eval_prior.py
+--tune``), never on the held-out ones."""
 VIRTUAL_RIG = {"views": 4, "distance_m": 6.0, "height_m": 1.5, "focal_px": 1000.0, "size_px": (1920, 1080)}
 """The virtual cameras of the 2D setting."""
 
