@@ -5,6 +5,7 @@
     humancal report [--partition P] [--format md|csv]   (P may also be cmu_mocap__held_out_02_14)
     humancal export detections|cameras --partition P --format F --out PATH
     humancal train lifter [--discard]    train the lifter here (replaces the shipped weights), or go back to them
+    humancal train prior [--variant V]   train a motion prior variant here and compute its held-out figures
     humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/capture_cli.py)
     humancal ui                          the Dagster UI on 127.0.0.1
 
@@ -92,14 +93,18 @@ def _stored_metrics(partitions: list[str] | None, headline_only: bool):
     from resources.io_managers import partition_path
 
     shared = {key: partition_path(artifacts_root(), asset, None) for key, asset in SHARED_METRIC_TABLES.items()}
+    prior_folder = UPath(artifacts_root()) / "prior_metrics"  # one table per variant, same held-out partition
+    prior_files = sorted(prior_folder.glob("*.parquet")) if prior_folder.exists() else []
     if partitions:
         files = [shared.get(p) or partition_path(artifacts_root(), "metric_tables", p) for p in partitions]
         missing = [p for p, f in zip(partitions, files) if not f.exists()]
         if missing:
             raise SystemExit(f"humancal: {_explain_missing_tables(missing)}")
+        if "cmu_mocap__held_out_02_14" in partitions:
+            files += prior_files
     else:
         folder = UPath(artifacts_root()) / "metric_tables"
-        files = [f for f in shared.values() if f.exists()]
+        files = [f for f in shared.values() if f.exists()] + prior_files
         files += sorted(folder.glob("*.parquet")) if folder.exists() else []
     if not files:
         raise SystemExit("humancal: no metric tables stored yet; run `humancal demo` or `humancal update` first")
@@ -282,6 +287,9 @@ def cmd_train(args) -> int:
     """Train the lifter on the CMU mocap under the data root; from then on it replaces the shipped weights."""
     import dagster as dg
 
+    if args.model == "prior":
+        return _train_prior(args)
+
     from humancal.lifter import LifterConfig
     from pipelines.definitions import artifacts_root, build_definitions
     from resources.lifter_source import trained_lifter_path
@@ -318,6 +326,43 @@ def cmd_train(args) -> int:
     _print_active_lifter()
     print("`humancal update` now re-lifts every sequence with it (`humancal train lifter --discard` goes back to "
           "the shipped weights)")
+    return 0
+
+
+def _train_prior(args) -> int:
+    """Train one variant of the motion prior (partition of ``motion_prior_checkpoint``) and compute its held-out
+    figures (``prior_metrics``), retargeting the mocap first if it never was."""
+    import dagster as dg
+
+    from humancal.prior import PRIOR_VARIANTS, PriorConfig
+    from pipelines.definitions import build_definitions
+
+    if args.discard:
+        raise SystemExit("humancal: --discard applies to the lifter only (the trained prior is an artifact of the graph)")
+    variant = args.variant or "motion_prior"
+    overrides = {k: v for k, v in (("seed", args.seed), ("epochs", args.epochs)) if v is not None}
+    configs = {v: PriorConfig.default(v).replace(**overrides) if v == variant else PriorConfig.default(v)
+               for v in PRIOR_VARIANTS}
+    defs = build_definitions(prior_configs=configs)
+    instance = _instance()
+    missing = _assets_missing_data(defs)
+    if dg.AssetKey("mocap_clips") in missing:
+        raise SystemExit(f"humancal: training the motion prior needs {missing[dg.AssetKey('mocap_clips')]}/ under the "
+                         "data root (set HUMANCAL_DATA_DIR)")
+    selection = [dg.AssetKey("motion_prior_checkpoint"), dg.AssetKey("prior_metrics")]
+    if instance.get_latest_materialization_event(dg.AssetKey("mocap_clips")) is None:
+        selection.insert(0, dg.AssetKey("mocap_clips"))
+    config = configs[variant]
+    print(f"training the motion prior '{variant}' ({config.epochs} epochs of {config.steps_per_epoch} steps, seed "
+          f"{config.seed}" + (", after retargeting the CMU mocap" if len(selection) == 3 else "") + "), then its "
+          "held-out figures ...", flush=True)
+    result = dg.materialize(assets=list(defs.assets), resources=defs.resources, partition_key=variant,
+                            selection=dg.AssetSelection.assets(*selection), instance=instance,
+                            run_config=QUIET_RUN_CONFIG, raise_on_error=False)
+    if not result.success:
+        print("humancal: training the motion prior failed (see the log above)", file=sys.stderr)
+        return 1
+    print("`humancal report --partition cmu_mocap__held_out_02_14` shows its figures")
     return 0
 
 
@@ -375,7 +420,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_export)
     p = sub.add_parser("train", help="train a model here on the data root's mocap (it then replaces the shipped one)")
-    p.add_argument("model", choices=("lifter",))
+    p.add_argument("model", choices=("lifter", "prior"))
+    p.add_argument("--variant", help="prior: the variant to train (default motion_prior; see docs/motion_prior.md)")
     p.add_argument("--seed", type=int, help="training seed (default: the shipped configuration's)")
     p.add_argument("--epochs", type=int, help="training epochs (default: the shipped configuration's)")
     p.add_argument("--discard", action="store_true", help="delete the trained model: the shipped one is in force again")
