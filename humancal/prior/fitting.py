@@ -45,6 +45,7 @@ log = logging.getLogger(__name__)
 _ROOT_POINTS = {"left_shoulder": 1.0, "right_shoulder": 1.0, "left_hip": 1.0, "right_hip": 1.0,
                 "nose": 0.3, "left_ear": 0.3, "right_ear": 0.3}
 """Keypoints (and weights) of the rigid root initialization: the torso, and the head a little."""
+_MAX_FROM_MEDIAN_M = 1.5
 
 
 @dataclass(frozen=True)
@@ -185,8 +186,14 @@ def _observed_points_3d(observations: KeypointObservations) -> tuple[np.ndarray,
     pixels = observations.points.detach().cpu().double().numpy().reshape(V, P * T * J, 2)
     weights = observations.visible.cpu().numpy().reshape(V, P * T * J).astype(np.float64)
     points, views = triangulate_dlt(list(observations.cameras), pixels, weights, min_views=2)
-    valid = (views >= 2) & np.isfinite(points).all(axis=-1)
-    return np.nan_to_num(points).reshape(P, T, J, 3), valid.reshape(P, T, J)
+    points, valid = points.reshape(P, T, J, 3), ((views >= 2) & np.isfinite(points).all(axis=-1)).reshape(P, T, J)
+    # Two views facing each other see a point along nearly the same ray: its triangulation can land metres away.
+    # Keep the points within 1.5 m of the frame's median point (a body is smaller than that around its middle).
+    masked = np.where(valid[..., None], points, np.nan)
+    with np.errstate(all="ignore"):
+        centre = np.nanmedian(masked, axis=2, keepdims=True)
+    valid &= np.linalg.norm(np.nan_to_num(points - centre, nan=np.inf), axis=-1) < _MAX_FROM_MEDIAN_M
+    return np.nan_to_num(points), valid
 
 
 def initial_root(body: BodyModel, rest: RestSkeleton, observations: KeypointObservations) -> tuple[Tensor, Tensor]:
