@@ -71,7 +71,9 @@ def main() -> None:
     parser.add_argument("--variant", default="motion_prior", choices=PRIOR_VARIANTS, help="PriorConfig.variant")
     parser.add_argument("--seed", type=int, default=0, help="PriorConfig.seed")
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
-    parser.add_argument("--out", type=Path, help="weights stem (outside the repo); default <tmp>/humancal_prior/<variant>")
+    parser.add_argument(
+        "--out", type=Path, help="weights stem (outside the repo); default <tmp>/humancal_prior/<variant>"
+    )
     parser.add_argument("--motions-table", type=Path, default=_DEFAULT_TABLE,
                         help="retargeted CMU motions table (read if present, else written)")
     parser.add_argument(
@@ -103,7 +105,7 @@ def main() -> None:
           f"windows of {config.clip_frames} frames, {args.threads} thread(s)")
     trained = train_motion_prior(clips, config, body_model, progress=_print_epoch, held_out_subjects=held_out)
     command = f"python scripts/train_prior.py --variant {args.variant} --seed {args.seed} --threads {args.threads}"
-    info = {"trained_with": command + overrides_text(overrides), "threads": args.threads}
+    info = {"trained_with": command + _overrides_text(overrides), "threads": args.threads}
     sidecar = save_prior(trained, out, info)
     if args.ship:
         save_prior(trained, SHIPPED_PRIOR_STEM, {**info, "trained_with": command + " --ship"})
@@ -112,11 +114,12 @@ def main() -> None:
     print(f"\nheld-out subjects {list(trained.held_out_subjects)}, {int(held['windows'])} windows of "
           f"{config.clip_frames} frames: reconstruction MPJPE {held['mpjpe_mm']:.1f} mm (23 keypoints, "
           f"posterior mean), KL {held['kl']:.3f}")
-    print(f"training wall time {trained.train_seconds:.0f} s ({trained.train_seconds / 60:.1f} min); weights "
+    print(f"training wall time {trained.train_seconds:.0f} s ({trained.train_seconds / 60:.1f} min), CPU time "
+          f"{trained.train_cpu_seconds:.0f} s; weights "
           f"{out}.safetensors (digest {sidecar['digest'][:16]}, data {trained.data_digest[:16]})")
 
 
-def overrides_text(overrides: dict) -> str:
+def _overrides_text(overrides: dict) -> str:
     return "".join(f" --{name.replace('_', '-')} {value}" for name, value in overrides.items())
 
 

@@ -116,6 +116,7 @@ def save_prior(trained: TrainedPrior, path: str | Path, info: dict[str, Any] | N
         "digest": weights_digest(state, trained.config),
         "history": trained.history,
         "train_seconds": trained.train_seconds,
+        "train_cpu_seconds": trained.train_cpu_seconds,
         "train_subjects": list(trained.train_subjects),
         "held_out_subjects": list(trained.held_out_subjects),
         "held_out": trained.held_out,
