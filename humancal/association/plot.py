@@ -1,0 +1,146 @@
+"""A picture of an association: the person ids over time, and one frame of every view with the 3D skeletons
+reprojected by the cameras over the 2D detections (no images: a blank canvas of each image's size)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from humancal.association.tracking import AssociationResult
+from humancal.camera import CameraRig
+from humancal.detections import DenseDetections
+from humancal.keypoints import LIMB_INDEX
+from humancal.plotting import pyplot, save_figure
+
+__all__ = ["association_frame", "plot_association"]
+
+_LIMBS = np.array(LIMB_INDEX)
+_REJECTED_COLOUR = "0.55"
+_COLUMNS = 4
+
+
+def _colour(person: int, colours):
+    return _REJECTED_COLOUR if person < 0 else colours(person % colours.N)
+
+
+def association_frame(result: AssociationResult) -> int:
+    """The frame with the most people in it (then the most associated detections; the earliest of equals):
+    where the picture says most."""
+    if len(result.skeleton_frame) == 0:
+        return int(result.frame.min()) if len(result.frame) else 0
+    frames, people = np.unique(result.skeleton_frame, return_counts=True)
+    associated = result.frame[result.person_id >= 0]
+    detections = np.array([(associated == f).sum() for f in frames]) if len(associated) else np.zeros(len(frames))
+    order = np.lexsort((frames, -detections, -people))
+    return int(frames[order[0]])
+
+
+def _draw_pose(ax, points_px: np.ndarray, colour, **style) -> None:
+    """Limbs (and joints) of one pose; NaN joints left out."""
+    a, b = points_px[_LIMBS[:, 0]], points_px[_LIMBS[:, 1]]
+    ok = np.isfinite(a).all(1) & np.isfinite(b).all(1)
+    for (xa, ya), (xb, yb) in zip(a[ok], b[ok]):
+        ax.plot([xa, xb], [ya, yb], color=colour, **style)
+
+
+def plot_association(
+    result: AssociationResult,
+    detections: DenseDetections,
+    rig: CameraRig,
+    path_png: str | Path,
+    *,
+    frame: int | None = None,
+    max_views: int = 8,
+    title: str | None = None,
+) -> Path:
+    """Draw who is who: a timeline of the person ids and one frame of the views.
+
+    Top: every detection as a dot at (frame, person id), coloured by id; the detections rejected as false
+    positives on their own row (``-1``, grey crosses). Below: one panel per view (at most ``max_views``, those
+    with the most detections in the frame), the image's size as a blank canvas, the 2D detections of the frame
+    as thin lines (coloured by their id; rejected ones grey, dashed) and every person's 3D skeleton of the frame
+    projected by the view's camera as thick lines with joints, in the same colour.
+
+    Args:
+        result: the association (:func:`~humancal.association.associate`).
+        detections: the detections it was run on (row-aligned with ``result``).
+        rig: the cameras it was run with (their image sizes set the canvases).
+        path_png: the PNG to write.
+        frame: the frame to draw the views of; default :func:`association_frame`.
+        max_views: most view panels drawn (>= 1).
+        title: the figure's title (default: counts of people and detections).
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: detections not row-aligned with the result, views outside the rig, or ``max_views`` < 1.
+    """
+    if len(detections) != len(result.frame) or not np.array_equal(detections.frame, result.frame) \
+            or not np.array_equal(detections.view, result.view):
+        raise ValueError(f"plot_association: the detections ({len(detections)} rows) must be row-aligned with the "
+                         f"association result ({len(result.frame)} rows)")
+    if len(result.view) and int(result.view.max()) >= len(rig):
+        raise ValueError(f"plot_association: detections use view {int(result.view.max())} but the rig has "
+                         f"{len(rig)} cameras")
+    if isinstance(max_views, bool) or not isinstance(max_views, (int, np.integer)) or max_views < 1:
+        raise ValueError(f"plot_association: max_views must be an integer >= 1, got {max_views!r}")
+    plt = pyplot()
+    colours = plt.get_cmap("tab10")
+    frame = association_frame(result) if frame is None else int(frame)
+    in_frame = result.frame == frame
+    counts = np.bincount(result.view[in_frame], minlength=len(rig))
+    views = np.sort(np.argsort(-counts, kind="stable")[:max_views])
+    rows = int(np.ceil(len(views) / _COLUMNS))
+    width_px, height_px = rig.image_size_px[views].max(axis=0)
+    panel_h = 3.2 * height_px / width_px
+    fig = plt.figure(figsize=(3.2 * _COLUMNS, 2.6 + rows * (panel_h + 0.4)))
+    grid = fig.add_gridspec(1 + rows, _COLUMNS, height_ratios=[2.6] + [panel_h + 0.4] * rows)
+
+    ax = fig.add_subplot(grid[0, :])
+    person = result.person_id
+    for p in np.unique(person[person >= 0]):
+        mine = person == p
+        ax.scatter(result.frame[mine], np.full(mine.sum(), p), s=4, color=_colour(int(p), colours), marker="|")
+    rejected = person < 0
+    ax.scatter(result.frame[rejected], np.full(rejected.sum(), -1), s=10, color=_REJECTED_COLOUR, marker="x",
+               linewidths=0.8, label=f"rejected ({int(rejected.sum())})")
+    ax.axvline(frame, color="k", linestyle=":", linewidth=1, label=f"frame {frame} (below)")
+    ax.set_xlabel("frame")
+    ax.set_ylabel("person id")
+    ax.set_yticks(np.arange(-1, max(result.num_people, 1)))
+    ax.set_ylim(-1.7, max(result.num_people, 1) - 0.3)
+    ax.grid(True, axis="x", alpha=0.3)
+    ax.legend(loc="upper right", fontsize=7)
+    ax.set_title(title or f"{result.num_people} people; {int((~rejected).sum())} of {len(person)} detections "
+                 "associated", fontsize=10)
+
+    skeletons = np.flatnonzero(result.skeleton_frame == frame)
+    joints = result.joints_world_m[skeletons]  # (S, 23, 3)
+    projected = rig.project(joints.reshape(-1, 3))[0].reshape(len(rig), len(skeletons), -1, 2) if len(skeletons) \
+        else np.zeros((len(rig), 0, joints.shape[1] if joints.ndim == 3 else 0, 2))
+    for k, v in enumerate(views):
+        ax = fig.add_subplot(grid[1 + k // _COLUMNS, k % _COLUMNS])
+        w, h = rig.image_size_px[v]
+        for row in np.flatnonzero(in_frame & (result.view == v)):
+            p = int(person[row])
+            _draw_pose(ax, detections.keypoints_px[row], _colour(p, colours), linewidth=0.8,
+                       linestyle="--" if p < 0 else "-", alpha=0.8)
+        for s, skeleton in enumerate(skeletons):
+            p = int(result.skeleton_person[skeleton])
+            points = projected[v, s]
+            _draw_pose(ax, points, _colour(p, colours), linewidth=2.2, alpha=0.55)
+            ax.scatter(points[:, 0], points[:, 1], s=5, color=_colour(p, colours))
+            seen = points[np.isfinite(points).all(1)]
+            if len(seen):
+                ax.annotate(str(p), seen.mean(axis=0), color=_colour(p, colours), fontsize=8, fontweight="bold",
+                            xytext=(6, 0), textcoords="offset points")
+        ax.set_xlim(0, w)
+        ax.set_ylim(h, 0)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(f"view {v}: {counts[v]} detections", fontsize=8)
+    fig.tight_layout()
+    return save_figure(fig, path_png, dpi=80)
