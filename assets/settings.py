@@ -16,7 +16,7 @@ from typing import Any, ClassVar, Literal
 import dagster as dg
 from pydantic import Field
 
-from humancal.association import AffinityConfig, TrackingConfig
+from humancal.association import AffinityConfig, SmoothingConfig, TrackingConfig
 from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig
 
 __all__ = ["IntrinsicsSettings", "ExtrinsicsSettings", "AssociationSettings", "attribute_docs", "library_field"]
@@ -128,12 +128,14 @@ class ExtrinsicsSettings(dg.Config):
 
 _T = TrackingConfig
 _A = AffinityConfig
+_S = SmoothingConfig
 
 
 class AssociationSettings(dg.Config):
     """Settings of the ``associations`` asset (:class:`humancal.association.TrackingConfig`, its scalar fields,
-    and the two weights of its :class:`~humancal.association.AffinityConfig`; the other affinity and matching
-    settings keep the library's defaults)."""
+    the two weights of its :class:`~humancal.association.AffinityConfig` and its
+    :class:`~humancal.association.SmoothingConfig` as ``smoothing*``; the other affinity and matching settings
+    keep the library's defaults)."""
 
     PIPELINE_DEFAULTS: ClassVar[dict[str, Any]] = {}
 
@@ -150,10 +152,17 @@ class AssociationSettings(dg.Config):
     min_track_s: float = library_field(_T, "min_track_s")
     outlier_threshold_px: float = library_field(_T, "outlier_threshold_px")
     num_people: int | None = library_field(_T, "num_people")
+    smoothing: bool = library_field(_S, "enabled")
+    smoothing_scale_px: float = library_field(_S, "scale_px")
+    smoothing_acceleration_mps2: float = library_field(_S, "acceleration_mps2")
+    smoothing_max_fill_frames: int = library_field(_S, "max_fill_frames")
 
     def to_library(self) -> TrackingConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""
         values = self.model_dump()
         affinity = AffinityConfig(geometric_weight=values.pop("geometric_weight"),
                                   pose_weight=values.pop("pose_weight"))
-        return TrackingConfig(affinity=affinity, **values)
+        smoothing = SmoothingConfig(enabled=values.pop("smoothing"), scale_px=values.pop("smoothing_scale_px"),
+                                    acceleration_mps2=values.pop("smoothing_acceleration_mps2"),
+                                    max_fill_frames=values.pop("smoothing_max_fill_frames"))
+        return TrackingConfig(affinity=affinity, smoothing=smoothing, **values)

@@ -13,7 +13,8 @@ Tables:
     views:        one row per view: name and image size (what a user knows without calibration).
     poses3d:      3D keypoints of people in the world frame, one row per (frame, person_id, joint).
     skeletons3d:  the people's 3D joints triangulated by the association, one row per (frame, person_id, joint);
-                  ``num_views`` views triangulated the joint (0, NaN coordinates and ``valid`` False where none).
+                  ``num_views`` views triangulated the joint in that frame (0 with ``valid`` True: filled from
+                  the person's neighbouring frames; 0, NaN coordinates and ``valid`` False: missing).
     cameras:      one row per view: pinhole intrinsics, world-to-camera extrinsics, image size.
     associations: person id of each detection (-1 = not a person / not associated).
     people:       per person body-model shape (anny phenotypes) and height.

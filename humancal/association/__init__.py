@@ -23,6 +23,7 @@ from humancal.association.cycle_matching import (
     round_to_clusters,
     solve_relaxation_cvxpy,
 )
+from humancal.association.track_smoothing import SmoothingConfig, smooth_tracks
 from humancal.association.tracking import (
     SKELETONS3D_SCHEMA,
     AssociationResult,
@@ -36,12 +37,14 @@ __all__ = [
     "AffinityConfig",
     "DetectionGeometry",
     "PairAffinities",
+    "SmoothingConfig",
     "combine_affinity",
     "cross_view_pairs",
     "detection_geometry",
     "detection_track_affinity",
     "pair_affinities",
     "rigid_residual_rms_m",
+    "smooth_tracks",
     "FrameMatching",
     "MatchingConfig",
     "WarmStart",

@@ -37,8 +37,13 @@ import pyarrow as pa
 from scipy.optimize import linear_sum_assignment
 
 from humancal.association.affinity import AffinityConfig, detection_track_affinity, pair_affinities
-from humancal.association.cluster_triangulation import triangulate_clusters, undistorted_keypoints_px
+from humancal.association.cluster_triangulation import (
+    cluster_observations,
+    triangulate_clusters,
+    undistorted_keypoints_px,
+)
 from humancal.association.cycle_matching import MatchingConfig, match_frames
+from humancal.association.track_smoothing import SmoothingConfig, smooth_tracks
 from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, LIMB_INDEX, NUM_JOINTS
@@ -67,8 +72,9 @@ _PREDICTION_FRAMES = 5
 
 SKELETONS3D_SCHEMA = SCHEMAS["skeletons3d"]
 """The ``skeletons3d`` table (registered in :mod:`humancal.tables`): the triangulated 3D joints of every person
-and frame, world metres, one row per (frame, person_id, joint); ``num_views`` views triangulated the joint (0 and
-NaN coordinates where none could: ``valid`` False)."""
+and frame, world metres, one row per (frame, person_id, joint); ``num_views`` views triangulated the joint in that
+frame (0 with ``valid`` True: filled from the track's neighbouring frames by the smoothing; 0 and NaN coordinates:
+missing, ``valid`` False)."""
 
 
 @dataclass(frozen=True)
@@ -92,10 +98,13 @@ class TrackingConfig:
         min_track_s: a track observed for less than this is rejected as a false positive, seconds (>= 0).
         outlier_threshold_px: triangulation drops, per joint, the views that reproject farther than this, pixels.
         num_people: the number of people if known (at most this many ids are kept), or None to estimate it.
+        smoothing: the temporal refinement of the tracked skeletons (``smoothing.enabled`` False: the
+            frame-by-frame triangulation as it is).
     """
 
     affinity: AffinityConfig = field(default_factory=AffinityConfig)
     matching: MatchingConfig = field(default_factory=MatchingConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
     match_threshold: float = 0.3
     temporal: bool = True
     fps: float = 30.0
@@ -113,6 +122,8 @@ class TrackingConfig:
             raise ValueError(f"TrackingConfig.affinity must be an AffinityConfig, got {type(self.affinity).__name__}")
         if not isinstance(self.matching, MatchingConfig):
             raise ValueError(f"TrackingConfig.matching must be a MatchingConfig, got {type(self.matching).__name__}")
+        if not isinstance(self.smoothing, SmoothingConfig):
+            raise ValueError(f"TrackingConfig.smoothing must be a SmoothingConfig, got {type(self.smoothing).__name__}")
         if not 0.0 <= self.match_threshold <= 1.0:
             raise ValueError(f"TrackingConfig.match_threshold must lie in [0, 1], got {self.match_threshold}")
         for name in ("fps", "assign_distance_m", "bone_tolerance", "outlier_threshold_px"):
@@ -147,12 +158,14 @@ class AssociationResult:
             rejected (a false positive, or a detection no cluster took).
         skeleton_frame: (S,) int64 frame of every skeleton (sorted by frame, then person).
         skeleton_person: (S,) int64 person of every skeleton.
-        joints_world_m: (S, 23, 3) triangulated canonical joints, world frame, metres (NaN where not triangulated).
-        joint_views: (S, 23) int64 views each joint was triangulated from (0 where not).
+        joints_world_m: (S, 23, 3) triangulated canonical joints (refined over time by the smoothing when it is
+            enabled), world frame, metres (NaN where missing).
+        joint_views: (S, 23) int64 views each joint was triangulated from in its frame (0 where not: missing, or
+            filled from the neighbouring frames where ``joints_world_m`` is finite).
         num_views: (S,) int64 detections (views) in the person's cluster of that frame.
         num_people: the number of people (estimated, or the one given where that many were found).
         stage_seconds: seconds per stage (``affinity``, ``matching``, ``triangulation``, ``tracking``,
-            ``temporal``, ``total``).
+            ``temporal``, ``smoothing``, ``total``).
         warnings: what went wrong without stopping the association (e.g. a view without detections).
     """
 
@@ -444,6 +457,14 @@ def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: Came
             t0 = time.perf_counter()
             person = _keep_tracks(_track(sk_frame, joints, sk_views, config), sk_frame, joints, config, warnings)
             seconds["tracking"] += time.perf_counter() - t0
+
+    seconds["smoothing"] = 0.0
+    if config.smoothing.enabled and (person >= 0).any():
+        t0 = time.perf_counter()
+        points, weights = cluster_observations(cluster, len(sk_frame), dense.view, keypoints, scores, len(cameras))
+        joints, filled = smooth_tracks(sk_frame, person, joints, points, weights, cameras, config.fps,
+                                       config.smoothing)
+        seconds["smoothing"] = time.perf_counter() - t0
 
     keep = person >= 0
     det_person_sorted = np.where(cluster >= 0, person[np.maximum(cluster, 0)] if len(person) else -1, -1)

@@ -10,6 +10,7 @@ import pytest
 from humancal.association import SKELETONS3D_SCHEMA, TrackingConfig, associate, to_associations_table
 from humancal.association import to_skeletons_table
 from humancal.association.cluster_triangulation import triangulate_clusters
+from humancal.association.track_smoothing import SmoothingConfig
 from humancal.camera import Camera, CameraRig
 from humancal.detections import DenseDetections
 from humancal.geometry.triangulation import triangulate_dlt
@@ -125,9 +126,32 @@ def test_skeletons_near_the_truth(scene3, result3):
     valid = np.isfinite(error)
     assert valid.mean() > 0.8
     assert np.median(error[valid]) < 0.05, np.median(error[valid])  # measured: about 1 cm
-    assert (result3.joint_views[valid] >= 2).all() and (result3.joint_views[~valid] == 0).all()
+    assert (result3.joint_views[~valid] == 0).all()
+    # joints no view triangulated in a frame, filled from the neighbouring frames of the track: few, and close
+    filled = valid & (result3.joint_views == 0)
+    assert (result3.joint_views[valid & ~filled] >= 2).all()
+    assert filled.mean() < 0.05 and (not filled.any() or np.median(error[filled]) < 0.1)
     assert (np.diff(result3.skeleton_frame) >= 0).all()
-    assert set(result3.stage_seconds) >= {"affinity", "matching", "triangulation", "tracking", "temporal", "total"}
+    assert set(result3.stage_seconds) >= {"affinity", "matching", "triangulation", "tracking", "temporal",
+                                          "smoothing", "total"}
+
+
+def test_smoothing_lowers_the_skeleton_error(scene3, result3):
+    """The temporal refinement against the frame-by-frame triangulation (the same association without it)."""
+    scene, dense, lifted, rig, truth = scene3
+    plain = associate(dense, lifted, rig, TrackingConfig(smoothing=SmoothingConfig(enabled=False)))
+    np.testing.assert_array_equal(plain.person_id, result3.person_id)
+
+    def median_error(result):
+        owner = {i: np.bincount(truth[(result.person_id == i) & (truth >= 0)]).argmax()
+                 for i in range(result.num_people)}
+        true = scene.keypoints_world_m[[owner[int(p)] for p in result.skeleton_person], result.skeleton_frame]
+        error = np.linalg.norm(result.joints_world_m - true, axis=-1)
+        return np.nanmean(error), np.isfinite(error).mean()
+
+    (smooth, covered), (raw, raw_covered) = median_error(result3), median_error(plain)
+    assert smooth < 0.8 * raw, (smooth, raw)
+    assert covered >= raw_covered
 
 
 def test_close_passes_keep_their_ids(body_model):
@@ -236,7 +260,8 @@ def test_tables(scene3, result3):
     assert list(skeletons.columns) == SKELETONS3D_SCHEMA.names
     assert len(skeletons) == len(result3.skeleton_frame) * NUM_JOINTS
     assert (skeletons["valid"] == np.isfinite(skeletons[["x_m", "y_m", "z_m"]]).all(axis=1)).all()
-    assert ((skeletons["num_views"] > 0) == skeletons["valid"]).all()
+    assert (skeletons.loc[skeletons["num_views"] > 0, "valid"]).all()  # 0 views and valid: filled over time
+    assert (skeletons["num_views"] == 0).mean() < 0.2
 
 
 # --- bad input ---------------------------------------------------------------------------------------------------
