@@ -133,10 +133,15 @@ def _idf1(d: pd.DataFrame) -> float:
     return 2.0 * idtp / (n_est + n_true)  # 2 IDTP / (2 IDTP + IDFP + IDFN), IDFP = n_est - IDTP, IDFN = n_true - IDTP
 
 
+_SEQUENCE_ALIGNED = {"pcp_avg": "pcp_avg_sequence_aligned", "mpjpe_mm": "mpjpe_sequence_aligned_mm"}
+
+
 def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,
                      gt_poses3d: pd.DataFrame, cameras: list[Camera], gt_cameras: list[Camera]) -> list[MetricRow]:
     """``mpjpe_mm`` and ``pcp_avg`` of the skeletons (ids mapped to the true ones per frame, aligned into the
-    ground-truth world by the cameras' similarity), by the dataset's protocol."""
+    ground-truth world by the cameras' similarity), by the dataset's protocol; and ``pcp_avg_sequence_aligned``,
+    ``mpjpe_sequence_aligned_mm``: the same after one more similarity for the whole sequence, fitted on the
+    evaluated joints (evaluation only; it shows how much of the error is the placement of the world)."""
     d = _labelled(estimated, truth)
     owner = _majority(d[(d["est"] >= 0) & (d["true"] >= 0)], ["frame", "est"], "true")
     owner = owner.sort_values(["frame", "true", "votes"], ascending=[True, True, False]).drop_duplicates(["frame", "true"])
@@ -148,13 +153,15 @@ def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.
                           "x_m": xyz[:, 0], "y_m": xyz[:, 1], "z_m": xyz[:, 2],
                           "valid": mapped["valid"].to_numpy(bool) & np.isfinite(xyz).all(1)})
     poses.loc[~poses["valid"], ["x_m", "y_m", "z_m"]] = 0.0
-    if spec.kind == "shelf":
-        rows = evaluate_shelf_poses(poses, gt_poses3d)
-    elif spec.kind == "synthetic":
-        rows = evaluate_canonical_poses(poses, gt_poses3d)
-    else:
+    protocols = {"shelf": evaluate_shelf_poses, "synthetic": evaluate_canonical_poses}
+    if spec.kind not in protocols:
         raise ValueError(f"sequence {spec.key}: no evaluation protocol for dataset kind {spec.kind!r}")
-    return [r for r in rows if r.metric in ("mpjpe_mm", "pcp_avg")]
+    rows = [r for r in protocols[spec.kind](poses, gt_poses3d) if r.metric in ("mpjpe_mm", "pcp_avg")]
+    # The same skeletons in the frame that fits them best (one similarity for the sequence): what the
+    # skeletons are worth apart from where the cameras put the world.
+    rows += [MetricRow(_SEQUENCE_ALIGNED[r.metric], r.value, r.unit)
+             for r in protocols[spec.kind](poses, gt_poses3d, sequence_aligned=True) if r.metric in _SEQUENCE_ALIGNED]
+    return rows
 
 
 def association_metric_table(

@@ -17,6 +17,7 @@ from humancal.associations import Associations
 from humancal.camera import Camera
 from humancal.detections import detections_to_dense
 from humancal.formats import SKELETONS, from_canonical
+from humancal.geometry.alignment import fit_similarity
 from humancal.geometry.triangulation import reprojection_errors_px
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX
 from humancal.poses import poses_to_dense
@@ -89,12 +90,23 @@ def _with_neck_pelvis(X: np.ndarray) -> np.ndarray:
     return np.concatenate([X, neck[:, None], pelvis[:, None]], axis=1)
 
 
-def evaluate_canonical_poses(pred: pd.DataFrame, gt: pd.DataFrame) -> list[MetricRow]:
+def _sequence_aligned(X_pred: np.ndarray, X_gt: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``X_pred`` moved by the one similarity (scale, rotation, translation) that best maps all its ``mask``ed
+    joints onto the ground truth's over the whole sequence (7 parameters for thousands of joints: the frame of a
+    self-calibrated world, not a per-pose fit)."""
+    if mask.sum() < 3:
+        return X_pred
+    similarity = fit_similarity(X_pred[mask], X_gt[mask])
+    return similarity.apply(X_pred.reshape(-1, 3)).reshape(X_pred.shape)
+
+
+def evaluate_canonical_poses(pred: pd.DataFrame, gt: pd.DataFrame, sequence_aligned: bool = False) -> list[MetricRow]:
     """Score canonical-23 ``poses3d`` predictions against canonical-23 ground truth.
 
     Predictions meet the ground truth by (frame, person_id). A ground-truth pose without a
     prediction counts as wrong for PCP and lowers ``coverage``; MPJPE and PA-MPJPE average over
-    joints valid on both sides.
+    joints valid on both sides. ``sequence_aligned``: the predictions are first moved by the one similarity
+    that best maps them onto the ground truth over the whole sequence.
 
     Returns:
         rows ``mpjpe_mm``, ``pa_mpjpe_mm``, ``pcp_avg`` (percent, over ground-truth poses and the
@@ -108,6 +120,8 @@ def evaluate_canonical_poses(pred: pd.DataFrame, gt: pd.DataFrame) -> list[Metri
     has = rows >= 0
     X_pred[has] = p.joints_world_m[rows[has]]
     both = g.valid & np.isfinite(X_pred).all(-1)
+    if sequence_aligned:
+        X_pred = _sequence_aligned(X_pred, g.joints_world_m, both)
 
     parts = list(CANONICAL_PCP_PARTS)
     correct = pcp_correct(_with_neck_pelvis(X_pred), _with_neck_pelvis(g.joints_world_m), list(CANONICAL_PCP_PARTS.values()))
@@ -172,8 +186,10 @@ SHELF_PCP_PARTS: dict[str, tuple[int, int]] = {
 SHELF_ACTORS = (0, 1, 2)
 
 
-def evaluate_shelf_poses(pred: pd.DataFrame, gt: pd.DataFrame) -> list[MetricRow]:
-    """Score canonical-23 predictions (person ids = ground-truth ids) against SHELF15 ground truth.
+def evaluate_shelf_poses(pred: pd.DataFrame, gt: pd.DataFrame, sequence_aligned: bool = False) -> list[MetricRow]:
+    """Score canonical-23 predictions (person ids = ground-truth ids) against SHELF15 ground truth
+    (``sequence_aligned``: first moved by the one similarity that best maps their 14 evaluated joints onto the
+    ground truth's over the whole sequence).
 
     Returns:
         ``pcp_actor1``..``pcp_actor3`` and ``pcp_avg`` (percent; the average of the three actors),
@@ -190,6 +206,9 @@ def evaluate_shelf_poses(pred: pd.DataFrame, gt: pd.DataFrame) -> list[MetricRow
     rows = np.array([index.get((f, i), -1) for f, i in zip(g.frame, g.person_id)], dtype=np.int64)
     X = np.full_like(g.joints_world_m, np.nan)
     X[rows >= 0] = pred15[rows[rows >= 0]]
+    if sequence_aligned:
+        evaluated = g.valid[:, :14] & np.isin(g.person_id, SHELF_ACTORS)[:, None] & np.isfinite(X[:, :14]).all(-1)
+        X = _sequence_aligned(X, g.joints_world_m, np.pad(evaluated, ((0, 0), (0, X.shape[1] - 14))))
     correct = pcp_correct(X, g.joints_world_m, list(SHELF_PCP_PARTS.values()))  # (N, 10)
     out, per_actor = [], []
     for k, actor in enumerate(SHELF_ACTORS):
