@@ -25,7 +25,7 @@ Every scene's result is written to ``OUT/scenes/`` as it finishes (a killed swee
 ``OUT/summary.md``, ``OUT/summary.json``, ``OUT/methods.csv`` (one row per scene and method) and
 ``OUT/association_sweep.png`` (F1 distribution and people-count errors per method) summarise.
 
-    python scripts/association_sweep.py --scenes 32 --ring 1 --jobs 2 --out /tmp/assoc_sweep
+    python scripts/association_sweep.py --scenes 32 --ring 1 --jobs 2 --out association_sweep_out
 """
 
 from __future__ import annotations
