@@ -100,12 +100,15 @@ def plot_association(
 
     ax = fig.add_subplot(grid[0, :])
     person = result.person_id
-    for p in np.unique(person[person >= 0]):
-        mine = person == p
-        ax.scatter(result.frame[mine], np.full(mine.sum(), p), s=4, color=_colour(int(p), colours), marker="|")
+    # one mark per (frame, id): the views of a frame would only draw over each other
+    marks = np.unique(np.stack([result.frame, person], axis=1), axis=0)
+    for p in np.unique(marks[marks[:, 1] >= 0, 1]):
+        frames = marks[marks[:, 1] == p, 0]
+        ax.scatter(frames, np.full(len(frames), p), s=4, color=_colour(int(p), colours), marker="|")
     rejected = person < 0
-    ax.scatter(result.frame[rejected], np.full(rejected.sum(), -1), s=10, color=_REJECTED_COLOUR, marker="x",
-               linewidths=0.8, label=f"rejected ({int(rejected.sum())})")
+    frames = marks[marks[:, 1] < 0, 0]
+    ax.scatter(frames, np.full(len(frames), -1), s=10, color=_REJECTED_COLOUR, marker="x", linewidths=0.8,
+               label=f"rejected ({int(rejected.sum())} detections)")
     ax.axvline(frame, color="k", linestyle=":", linewidth=1, label=f"frame {frame} (below)")
     ax.set_xlabel("frame")
     ax.set_ylabel("person id")
