@@ -104,7 +104,7 @@ def plot_association(
     marks = np.unique(np.stack([result.frame, person], axis=1), axis=0)
     for p in np.unique(marks[marks[:, 1] >= 0, 1]):
         frames = marks[marks[:, 1] == p, 0]
-        ax.scatter(frames, np.full(len(frames), p), s=4, color=_colour(int(p), colours), marker="|")
+        ax.scatter(frames, np.full(len(frames), p), s=9, color=_colour(int(p), colours), marker="s", linewidths=0)
     rejected = person < 0
     frames = marks[marks[:, 1] < 0, 0]
     ax.scatter(frames, np.full(len(frames), -1), s=10, color=_REJECTED_COLOUR, marker="x", linewidths=0.8,
@@ -115,7 +115,7 @@ def plot_association(
     ax.set_yticks(np.arange(-1, max(result.num_people, 1)))
     ax.set_ylim(-1.7, max(result.num_people, 1) - 0.3)
     ax.grid(True, axis="x", alpha=0.3)
-    ax.legend(loc="upper right", fontsize=7)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=7, frameon=False)
     ax.set_title(title or f"{result.num_people} people; {int((~rejected).sum())} of {len(person)} detections "
                  "associated", fontsize=10)
 
