@@ -42,7 +42,9 @@ def _interval(name: str, value: Any, low: float, high: float) -> tuple[float, fl
     ok = isinstance(value, (tuple, list)) and len(value) == 2
     ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
     if not ok or not low <= value[0] <= value[1] <= high:
-        raise ValueError(f"PriorConfig.{name}={value!r} must be a (min, max) pair with min <= max within [{low}, {high}]")
+        raise ValueError(
+            f"PriorConfig.{name}={value!r} must be a (min, max) pair with min <= max within [{low}, {high}]"
+        )
     return float(value[0]), float(value[1])
 
 
