@@ -134,7 +134,7 @@ def test_mirroring_mirrors_the_body(body_model):
             if ("left" in n or "right" in n) else i for i, n in enumerate(CANONICAL_JOINTS)]
     expected = keypoints[:, :, twin] * torch.tensor([-1.0, 1.0, 1.0])
     error_mm = 1000 * torch.linalg.vector_norm(mirrored - expected, dim=-1)
-    # anny's mesh is symmetric up to a fraction of a millimetre (measured max 0.4 mm); a wrong axis or a
+    # anny's mesh is symmetric up to a fraction of a millimetre (measured max 0.29 mm); a wrong axis or a
     # missing swap moves points by decimetres.
     assert float(error_mm.max()) < 2.0, float(error_mm.max())
     assert float(1000 * torch.linalg.vector_norm(mirrored - keypoints, dim=-1).mean()) > 50.0
