@@ -83,10 +83,13 @@ def test_association_metric_rows(materialized):
     for method in ("association", "epipolar_only", "association_gt_cameras", "epipolar_only_gt_cameras"):
         rows = metrics[metrics["method"] == method].set_index("metric")["value"]
         assert set(rows.index) == {"pairwise_precision", "pairwise_recall", "pairwise_f1", "id_switches", "idf1",
-                                   "fp_rejection_rate", "num_people_error", "mpjpe_mm", "pcp_avg", "seconds"}, method
+                                   "fp_rejection_rate", "num_people_error", "mpjpe_mm", "pcp_avg", "seconds",
+                                   "pcp_avg_sequence_aligned", "mpjpe_sequence_aligned_mm"}, method
         assert rows["pairwise_f1"] > 0.9 and rows["pairwise_precision"] > 0.9, (method, rows.to_dict())
         assert rows["num_people_error"] == 0 and rows["id_switches"] <= 2, (method, rows.to_dict())
         assert rows["mpjpe_mm"] < 100 and rows["pcp_avg"] > 80, (method, rows.to_dict())
+        # one least-squares similarity for the whole sequence: the mean joint error stays about the same or drops
+        assert rows["mpjpe_sequence_aligned_mm"] <= 1.05 * rows["mpjpe_mm"], (method, rows.to_dict())
         assert 0 < rows["seconds"] < 60
     # the ground-truth camera rows are not figures of the estimated cameras: no failed-checks mark
     assert metrics.loc[metrics["method"] == "association_gt_cameras", "failed_checks"].isna().all()
