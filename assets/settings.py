@@ -150,6 +150,7 @@ class AssociationSettings(dg.Config):
     bone_tolerance: float = library_field(_T, "bone_tolerance")
     min_views: int = library_field(_T, "min_views")
     min_track_s: float = library_field(_T, "min_track_s")
+    stitch_window_s: float = library_field(_T, "stitch_window_s")
     outlier_threshold_px: float = library_field(_T, "outlier_threshold_px")
     num_people: int | None = library_field(_T, "num_people")
     smoothing: bool = library_field(_S, "enabled")

@@ -96,6 +96,8 @@ class TrackingConfig:
             shoulder and hip widths, torso sides) between a cluster and a track must stay below it (> 0).
         min_views: views a cluster needs to start a track (>= 2).
         min_track_s: a track observed for less than this is rejected as a false positive, seconds (>= 0).
+        stitch_window_s: when ``num_people`` is not given, a track that starts at most this long after another
+            one ended continues it when the two share bone lengths and one could walk to the other (0: never).
         outlier_threshold_px: triangulation drops, per joint, the views that reproject farther than this, pixels.
         num_people: the number of people if known (at most this many ids are kept), or None to estimate it.
         smoothing: the temporal refinement of the tracked skeletons (``smoothing.enabled`` False: the
@@ -114,6 +116,7 @@ class TrackingConfig:
     bone_tolerance: float = 0.2
     min_views: int = 2
     min_track_s: float = 0.3
+    stitch_window_s: float = 20.0
     outlier_threshold_px: float = 25.0
     num_people: int | None = None
 
@@ -130,7 +133,7 @@ class TrackingConfig:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"TrackingConfig.{name} must be a positive number, got {value}")
-        for name in ("reid_window_s", "reid_speed_mps", "min_track_s"):
+        for name in ("reid_window_s", "reid_speed_mps", "min_track_s", "stitch_window_s"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"TrackingConfig.{name} must be a number >= 0, got {value}")
@@ -310,11 +313,19 @@ def _track(frames: np.ndarray, joints: np.ndarray, views: np.ndarray, config: Tr
                 for j in np.flatnonzero(cost[i] <= 1.0):
                     if _bone_mismatch(bones[rows[j]], body) > config.bone_tolerance:
                         cost[i, j] = np.inf
-            ti, si = linear_sum_assignment(np.where(cost <= 1.0, cost, 1e6))
-            for i, j in zip(ti, si):
-                if cost[i, j] <= 1.0:
-                    alive[i].update(f, rows[j], joints[rows[j]], centres[rows[j]])
-                    track_of[rows[j]] = alive[i].index
+            # Cascade: the tracks seen in the previous frame choose first; the lost ones (re-identification) only
+            # take what is left, so that a person walking on is never taken by a lost track nearby.
+            for tier in (np.flatnonzero(gap <= 1), np.flatnonzero(gap > 1)):
+                free = np.flatnonzero(track_of[rows] < 0)
+                if len(tier) == 0 or len(free) == 0:
+                    continue
+                sub = cost[np.ix_(tier, free)]
+                ti, si = linear_sum_assignment(np.where(sub <= 1.0, sub, 1e6))
+                for i, j in zip(ti, si):
+                    if sub[i, j] <= 1.0:
+                        row = rows[free[j]]
+                        alive[tier[i]].update(f, row, joints[row], centres[row])
+                        track_of[row] = alive[tier[i]].index
         for j in rows[track_of[rows] < 0]:
             if views[j] >= config.min_views:
                 tracks.append(_Track(len(tracks), f, j, joints[j], centres[j]))
@@ -332,9 +343,50 @@ def _keep_tracks(track_of: np.ndarray, frames: np.ndarray, joints: np.ndarray, c
     for t in ids[length < min_frames]:
         track_of[track_of == t] = -1
     kept = np.unique(track_of[track_of >= 0])
-    if config.num_people is not None and len(kept) > config.num_people:
+    if config.num_people is None and config.stitch_window_s > 0:
+        track_of = _stitch_tracks(track_of, frames, joints, config)
+    elif config.num_people is not None and len(kept) > config.num_people:
         track_of = _merge_surplus(track_of, frames, joints, config)
     return _number_by_first_frame(track_of, frames)
+
+
+def _stitch_tracks(track_of: np.ndarray, frames: np.ndarray, joints: np.ndarray, config: TrackingConfig) -> np.ndarray:
+    """Join a track that starts after another one ended (within ``stitch_window_s``) into it when the two share
+    bone lengths (within ``bone_tolerance``) and the person could have walked from one end to the other
+    (``assign_distance_m`` + ``reid_speed_mps`` x gap): a person back after longer than the re-identification
+    window keeps their id. Tracks are taken in order of their first frame; each joins the nearest such track."""
+    track_of = track_of.copy()
+    ids = np.unique(track_of[track_of >= 0])
+    if len(ids) < 2:
+        return track_of
+    rows_of = {t: np.flatnonzero(track_of == t) for t in ids}
+    bones = {t: np.nanmedian(_bone_lengths(joints[r]), axis=0) for t, r in rows_of.items()}
+    order = sorted(ids, key=lambda t: frames[rows_of[t][0]])
+    window = config.stitch_window_s * config.fps
+    for late in order:
+        mine = rows_of[late]
+        start = frames[mine[0]]
+        best, best_cost = None, np.inf
+        for early in order:
+            theirs = rows_of.get(early)
+            if early == late or theirs is None or len(theirs) == 0:
+                continue
+            end = frames[theirs[-1]]
+            gap = start - end
+            if gap <= 0 or gap > window:
+                continue
+            if _bone_mismatch(bones[late], bones[early]) > config.bone_tolerance:
+                continue
+            distance = _joint_distance(joints[theirs[-1]][None], joints[mine[0]][None])[0, 0]
+            cost = distance / (config.assign_distance_m + config.reid_speed_mps * (gap - 1) / config.fps)
+            if cost <= 1.0 and cost < best_cost:
+                best, best_cost = early, cost
+        if best is not None:
+            logger.info("associate: track %d (from frame %d) continues track %d", late, start, best)
+            track_of[mine] = best
+            rows_of[best] = np.sort(np.concatenate([rows_of[best], mine]))
+            rows_of[late] = np.zeros(0, np.int64)
+    return track_of
 
 
 def _merge_surplus(track_of: np.ndarray, frames: np.ndarray, joints: np.ndarray, config: TrackingConfig) -> np.ndarray:

@@ -179,10 +179,15 @@ def test_a_person_missing_from_every_view_gets_the_same_id_back(scene3):
     ids = id_of_each_person(truth[keep], result.person_id)
     assert all(len(v) == 1 for v in ids.values()) and len(set.union(*ids.values())) == 3, ids
     assert result.num_people == 3
-    # and with a re-identification window shorter than the gap, the person comes back as someone new
-    short = associate(subset(dense, keep), lifted.subset(keep), rig, TrackingConfig(reid_window_s=0.2))
+    # with a re-identification window shorter than the gap and no stitching, the person comes back as someone new
+    short = associate(subset(dense, keep), lifted.subset(keep), rig,
+                      TrackingConfig(reid_window_s=0.2, stitch_window_s=0.0))
     assert len(id_of_each_person(truth[keep], short.person_id)[0]) == 2
     assert short.num_people == 4
+    # and the stitching of tracks that share bone lengths gives the id back
+    stitched = associate(subset(dense, keep), lifted.subset(keep), rig, TrackingConfig(reid_window_s=0.2))
+    assert all(len(v) == 1 for v in id_of_each_person(truth[keep], stitched.person_id).values())
+    assert stitched.num_people == 3
 
 
 def test_num_people_given_merges_the_surplus(scene3):
