@@ -19,7 +19,7 @@ from humancal.tables import empty_table
 from resources.datasets import DatasetsResource
 
 
-@sequence_asset("metrics", code_version="10")
+@sequence_asset("metrics", code_version="11")
 def metric_tables(
     context: dg.AssetExecutionContext,
     datasets: DatasetsResource,

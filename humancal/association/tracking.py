@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -360,7 +361,9 @@ def _stitch_tracks(track_of: np.ndarray, frames: np.ndarray, joints: np.ndarray,
     if len(ids) < 2:
         return track_of
     rows_of = {t: np.flatnonzero(track_of == t) for t in ids}
-    bones = {t: np.nanmedian(_bone_lengths(joints[r]), axis=0) for t, r in rows_of.items()}
+    with warnings.catch_warnings():  # a bone never measured in a track stays NaN (not compared)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        bones = {t: np.nanmedian(_bone_lengths(joints[r]), axis=0) for t, r in rows_of.items()}
     order = sorted(ids, key=lambda t: frames[rows_of[t][0]])
     window = config.stitch_window_s * config.fps
     for late in order:
