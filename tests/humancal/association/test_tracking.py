@@ -374,3 +374,25 @@ def test_seeded_scenes(body_model, people, views, seed):
           f"{result.stage_seconds['total']:.2f} s")
     assert f1(precision, recall) > 0.97
     assert abs(result.num_people - true_people) <= 1
+
+
+def test_stitching_joins_only_the_same_body_within_reach():
+    """Unit rule of the stitching: a track that starts after another ended continues it only with the same bone
+    lengths, within the window, and within walking distance."""
+    from humancal.association.tracking import _stitch_tracks
+
+    rng = np.random.default_rng(0)
+    body = rng.normal(0, 0.3, (NUM_JOINTS, 3)) + [0.0, 0.0, 1.0]
+    fps = 30.0
+
+    def run(second_body, start, offset_m, config=TrackingConfig(fps=fps)):
+        frames = np.r_[np.arange(0, 30), np.arange(start, start + 30)]
+        joints = np.concatenate([np.repeat(body[None], 30, 0), np.repeat(second_body[None] + offset_m, 30, 0)])
+        track_of = np.r_[np.zeros(30, np.int64), np.ones(30, np.int64)]
+        return _stitch_tracks(track_of, frames, joints, config)
+
+    assert set(run(body, 60, [0.5, 0.0, 0.0])) == {0}  # same body, 1 s later, 0.5 m away: one person
+    assert set(run(1.3 * (body - body.mean(0)) + body.mean(0), 60, 0.0)) == {0, 1}  # a bigger body: someone else
+    assert set(run(body, 60, [4.0, 0.0, 0.0])) == {0, 1}  # 4 m in 1 s: too far to walk
+    assert set(run(body, 30 + 25 * 30, 0.0)) == {0, 1}  # back after 25 s: beyond the 20 s window
+    assert set(run(body, 60, 0.0, TrackingConfig(fps=fps, stitch_window_s=0.0))) == {0, 1}  # stitching off
