@@ -67,7 +67,7 @@ def _tune(body, clips, priors, args) -> None:
         for variant, prior in priors.items():
             method = denoise_method(variant)
             base = DENOISE_FIT_CONFIGS[method].replace(iterations=args.iterations or 300)
-            for latent, local_linear in itertools.product((1e-4, 1e-3, 1e-2), (0.3, 1.0, 3.0)):
+            for latent, local_linear in itertools.product((1e-4, 1e-3, 1e-2), (1.0, 10.0, 100.0, 1000.0)):
                 config = base.replace(weight_latent=latent, weight_local_linear=local_linear)
                 r = denoising_benchmark(body, segments, {variant: prior}, {method: config}, setting, args.seed,
                                         include_no_prior=False)
