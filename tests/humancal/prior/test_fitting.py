@@ -76,6 +76,7 @@ def test_initial_root_from_2d_views(body_model, scene):
     torch.testing.assert_close(t_root, centred, atol=1e-3, rtol=0)
 
 
+@pytest.mark.slow  # an optimisation of tens of steps through the body model: ~5-10 s
 def test_no_prior_fit_reproduces_clean_keypoints(body_model, scene):
     rest, _, _, keypoints = scene
     visible = torch.ones(keypoints.shape[:-1], dtype=torch.bool)
@@ -101,6 +102,7 @@ def test_missing_keypoints_are_ignored(body_model, scene):
     torch.testing.assert_close(far.keypoints_m, near.keypoints_m)
 
 
+@pytest.mark.slow  # an optimisation of tens of steps through the body model: ~5-10 s
 def test_latent_fit_leaves_the_prior_untouched_and_lowers_the_objective(body_model, scene):
     rest, _, _, keypoints = scene
     torch.manual_seed(0)
