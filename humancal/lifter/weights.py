@@ -17,8 +17,6 @@ CMU mocap: :func:`shipped_checkpoint` is what the graph uses until a lifter is t
 from __future__ import annotations
 
 import json
-import os
-import uuid
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +24,7 @@ from safetensors.torch import load_file, save_file
 
 from humancal.lifter.infer import CHECKPOINT_FORMAT
 from humancal.lifter.train import checkpoint_digest
+from humancal.weight_files import weights_pair_paths, write_atomically
 
 __all__ = ["SHIPPED_LIFTER_STEM", "LifterWeightsError", "write_lifter_weights", "read_lifter_weights",
            "read_lifter_info", "shipped_checkpoint", "shipped_info"]
@@ -40,21 +39,6 @@ class LifterWeightsError(ValueError):
     """A lifter weights pair is missing, unreadable, or does not match its recorded digest."""
 
 
-def _paths(stem: str | Path) -> tuple[Path, Path]:
-    stem = Path(stem)
-    if stem.suffix in (".safetensors", ".json"):
-        stem = stem.with_suffix("")
-    return stem.with_suffix(".safetensors"), stem.with_suffix(".json")
-
-
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
-    try:
-        write(tmp)
-        tmp.chmod(0o644)  # readable like any package file, whatever the writer's default
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def write_lifter_weights(checkpoint: dict[str, Any], stem: str | Path, info: dict[str, Any] | None = None) -> dict:
@@ -68,15 +52,15 @@ def write_lifter_weights(checkpoint: dict[str, Any], stem: str | Path, info: dic
     Returns:
         The sidecar dict as written (with ``digest``).
     """
-    tensors_path, sidecar_path = _paths(stem)
+    tensors_path, sidecar_path = weights_pair_paths(stem)
     tensors_path.parent.mkdir(parents=True, exist_ok=True)
     state = {name: t.detach().cpu().contiguous() for name, t in checkpoint["state_dict"].items()}
     sidecar = {key: checkpoint[key] for key in _SIDECAR_KEYS if key in checkpoint}
     sidecar["digest"] = checkpoint_digest(checkpoint)
     sidecar.update(info or {})
-    _atomic_write(tensors_path, lambda p: save_file(state, str(p), metadata={"format": CHECKPOINT_FORMAT,
+    write_atomically(tensors_path, lambda p: save_file(state, str(p), metadata={"format": CHECKPOINT_FORMAT,
                                                                               "digest": sidecar["digest"]}))
-    _atomic_write(sidecar_path, lambda p: p.write_text(json.dumps(sidecar, indent=2, sort_keys=True) + "\n"))
+    write_atomically(sidecar_path, lambda p: p.write_text(json.dumps(sidecar, indent=2, sort_keys=True) + "\n"))
     return sidecar
 
 
@@ -86,7 +70,7 @@ def read_lifter_info(stem: str | Path) -> dict[str, Any]:
     Raises:
         LifterWeightsError: the sidecar is missing or not valid JSON.
     """
-    _, sidecar_path = _paths(stem)
+    _, sidecar_path = weights_pair_paths(stem)
     try:
         info = json.loads(sidecar_path.read_text())
     except FileNotFoundError:
@@ -107,7 +91,7 @@ def read_lifter_weights(stem: str | Path) -> dict[str, Any]:
     Raises:
         LifterWeightsError: a file is missing or unreadable, or the weights do not match the sidecar's digest.
     """
-    tensors_path, sidecar_path = _paths(stem)
+    tensors_path, sidecar_path = weights_pair_paths(stem)
     info = read_lifter_info(stem)
     try:
         state = load_file(str(tensors_path))

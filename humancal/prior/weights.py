@@ -20,8 +20,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import uuid
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +29,7 @@ from safetensors.torch import load_file, save_file
 from humancal.prior.config import PriorConfig
 from humancal.prior.model import MotionVAE
 from humancal.prior.train import TrainedPrior
+from humancal.weight_files import weights_pair_paths, write_atomically
 
 __all__ = [
     "PRIOR_WEIGHTS_FORMAT",
@@ -56,21 +55,6 @@ class PriorWeightsError(ValueError):
     """A motion-prior weights pair is missing, unreadable, of another variant or shape, or damaged."""
 
 
-def _paths(path: str | Path) -> tuple[Path, Path]:
-    stem = Path(path)
-    if stem.suffix in (".safetensors", ".json"):
-        stem = stem.with_suffix("")
-    return stem.with_suffix(".safetensors"), stem.with_suffix(".json")
-
-
-def _atomic_write(path: Path, write) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
-    try:
-        write(tmp)
-        tmp.chmod(0o644)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def weights_digest(state: dict[str, torch.Tensor], config: PriorConfig) -> str:
@@ -107,7 +91,7 @@ def save_prior(trained: TrainedPrior, path: str | Path, info: dict[str, Any] | N
     Returns:
         The sidecar dict as written.
     """
-    tensors_path, sidecar_path = _paths(path)
+    tensors_path, sidecar_path = weights_pair_paths(path)
     tensors_path.parent.mkdir(parents=True, exist_ok=True)
     state = {name: t.detach().cpu().to(torch.float32).contiguous() for name, t in trained.model.state_dict().items()}
     sidecar = {
@@ -126,11 +110,11 @@ def save_prior(trained: TrainedPrior, path: str | Path, info: dict[str, Any] | N
     }
     sidecar.update(info or {})
     sidecar = _finite(sidecar)
-    _atomic_write(
+    write_atomically(
         tensors_path,
         lambda p: save_file(state, str(p), metadata={"format": PRIOR_WEIGHTS_FORMAT, "digest": sidecar["digest"]}),
     )
-    _atomic_write(sidecar_path, lambda p: p.write_text(json.dumps(sidecar, indent=2, sort_keys=True) + "\n"))
+    write_atomically(sidecar_path, lambda p: p.write_text(json.dumps(sidecar, indent=2, sort_keys=True) + "\n"))
     return sidecar
 
 
@@ -140,7 +124,7 @@ def read_prior_info(path: str | Path) -> dict[str, Any]:
     Raises:
         PriorWeightsError: the sidecar is missing, not valid JSON, of another format, or lacks a field.
     """
-    _, sidecar_path = _paths(path)
+    _, sidecar_path = weights_pair_paths(path)
     try:
         info = json.loads(sidecar_path.read_text())
     except FileNotFoundError:
@@ -175,7 +159,7 @@ def load_prior(path: str | Path, variant: str | None = None) -> tuple[MotionVAE,
             another variant; tensor names or shapes differ from the model's; the weights do not match the
             sidecar's digest.
     """
-    tensors_path, sidecar_path = _paths(path)
+    tensors_path, sidecar_path = weights_pair_paths(path)
     info = read_prior_info(path)
     try:
         config = PriorConfig.from_dict(info["config"])
