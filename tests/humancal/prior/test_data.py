@@ -24,15 +24,6 @@ OMEGA_RAD = 0.05
 """Angular speed of the test clips about z, radians per frame."""
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Small networks run fastest on one thread (two threads crawl when the other core is busy)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def _spinning_clip(name: str, subject: str, frames: int) -> SimpleNamespace:
     """Every bone (root included) turning about z at OMEGA_RAD per frame: frame t is Rz(OMEGA_RAD * t)."""
     angles = OMEGA_RAD * torch.arange(frames, dtype=torch.float64)

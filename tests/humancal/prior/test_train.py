@@ -32,14 +32,6 @@ def clips():
     return clips_from_retargeted([_smooth_clip(i, f"s{i % 3}") for i in range(6)])
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def _train(clips, body_model, config, progress=None) -> TrainedPrior:
     return train_motion_prior(clips, config, body_model, progress=progress, held_out_subjects=("s2",))
 

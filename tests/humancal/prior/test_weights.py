@@ -25,15 +25,6 @@ from humancal.prior import (
 )
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Small networks run fastest on one thread (two threads crawl when the other core is busy)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def _trained(variant: str = "motion_prior", **changes) -> TrainedPrior:
     config = PriorConfig.tiny(variant).replace(**changes)
     with torch.random.fork_rng(devices=[]):
