@@ -74,7 +74,7 @@ def export_motions(
             motions (naming the field and the expected form). Writes are atomic: nothing half-written is left.
     """
     if fmt not in MOTION_FORMATS:
-        raise FormatError(None, "format", f"one of {', '.join(MOTION_FORMATS)}", fmt)
+        raise FormatError(None, "format", f"one of {', '.join(MOTION_FORMATS)}", repr(fmt))
     if frames is not None and fmt != "obj":
         raise FormatError(None, "frames", "no frame selection (only the obj export writes a subset of frames)", frames)
     if fmt == "bvh":
