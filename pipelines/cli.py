@@ -4,6 +4,7 @@
     humancal update [--partition P ...]  materialize only what is missing or stale
     humancal report [--partition P] [--format md|csv]   (P may also be cmu_mocap__held_out_02_14)
     humancal export detections|cameras --partition P --format F --out PATH
+    humancal export motions --partition P --format bvh|gltf|npz|obj --out DIR [--frames A:B[:S]] [--fps F]
     humancal train lifter [--discard]    train the lifter here (replaces the shipped weights), or go back to them
     humancal train prior [--variant V]   train a motion prior variant here and compute its held-out figures
     humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/capture_cli.py)
@@ -269,6 +270,8 @@ def cmd_export(args) -> int:
     from humancal.camera import cameras_from_table
     from humancal.formats import write_cameras, write_openpose
 
+    if args.what == "motions":
+        return _export_motions(args)
     if args.what == "detections":
         if args.format != "openpose":
             raise SystemExit("humancal: detections export supports --format openpose")
@@ -280,6 +283,78 @@ def cmd_export(args) -> int:
         path = write_cameras(cameras, args.out, args.format)
         what = CAMERA_ASSETS.get(asset, "stored")
         print(f"wrote {len(cameras)} {what} cameras (asset {asset}, format {args.format}) to {path}")
+    return 0
+
+
+DEFAULT_FPS = 30.0
+"""Frame rate of a sequence whose dataset does not state one (Shelf, captures registered without --fps)."""
+
+
+def _sequence_fps(partition: str) -> tuple[float, str]:
+    """The frame rate of a partition's sequence and where it comes from (its datasets entry, or the default)."""
+    from pipelines.definitions import defs
+
+    spec = defs.resources["datasets"].spec(partition)
+    if spec.options.get("fps") is not None:
+        return float(spec.options["fps"]), f"the {spec.kind} options of {partition}"
+    if spec.kind == "synthetic":
+        from humancal.synthetic import preset
+
+        options = dict(spec.options)
+        name = options.pop("preset", "demo")
+        return float(preset(name, **options).fps), f"synthetic preset {name!r}"
+    return DEFAULT_FPS, f"default: {partition} states no frame rate; pass --fps to set it"
+
+
+def _frame_slice(text: str | None) -> slice | None:
+    """``A:B[:S]`` (sequence frame numbers, B excluded; each part may be empty) as a slice."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        if len(parts) not in (2, 3):
+            raise ValueError
+        numbers = [int(p) if p.strip() else None for p in parts]
+    except ValueError:
+        raise SystemExit(f"humancal: --frames expects START:STOP[:STEP] frame numbers (e.g. 0:300:10), got {text!r}")
+    return slice(*numbers)
+
+
+def _export_motions(args) -> int:
+    """Write the stored fitted motions of a partition as BVH, glTF, npz or per-frame OBJ files."""
+    import torch
+    from tqdm import tqdm
+
+    from humancal.body import BodyModel
+    from humancal.fitting import FittedMotions
+    from humancal.formats.motions import MOTION_FORMATS, export_motions, mesh_selection, person_spans
+
+    if args.format not in MOTION_FORMATS:
+        raise SystemExit(f"humancal: motions export supports --format {', '.join(MOTION_FORMATS)}; got {args.format}")
+    frames = _frame_slice(args.frames)
+    if frames is not None and args.format != "obj":
+        raise SystemExit("humancal: --frames applies to --format obj only (the other formats hold every frame)")
+    table = _stored_table("fitted_motions", args.partition)
+    fps, source = (args.fps, "--fps") if args.fps is not None else _sequence_fps(args.partition)
+    motions = FittedMotions.from_table(table, fps)
+    print(f"{motions.num_people} people, frames {motions.frames[0]}-{motions.frames[-1]} at {fps:g} fps ({source})")
+    torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
+    body = BodyModel()
+    progress = None
+    if args.format == "obj":
+        total = sum(len(indices) for _, indices in mesh_selection(motions, frames))
+        progress = tqdm(total=total, unit="mesh", desc="OBJ meshes")
+    try:
+        paths = export_motions(motions, body, args.format, args.out, sequence=args.partition, frames=frames,
+                               progress=progress.update if progress is not None else None)
+    finally:
+        if progress is not None:
+            progress.close()
+    if args.format == "bvh":
+        for span, path in zip(person_spans(motions), paths):
+            print(f"person {span.person_id}: frames {motions.frames[span.first]}-{motions.frames[span.last]} -> {path}")
+    else:
+        print(f"wrote {len(paths)} file(s) under {args.out}" if len(paths) != 1 else f"wrote {paths[0]}")
     return 0
 
 
@@ -407,12 +482,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("md", "csv"), default="md")
     p.add_argument("--all", action="store_true", help="md: include per-joint / per-view rows (csv always has them)")
     p.set_defaults(func=cmd_report)
-    p = sub.add_parser("export", help="write stored detections or cameras in another tool's format")
-    p.add_argument("what", choices=("detections", "cameras"))
+    p = sub.add_parser("export", help="write stored detections, cameras or fitted motions in another tool's format")
+    p.add_argument("what", choices=("detections", "cameras", "motions"))
     p.add_argument("--partition", required=True)
     p.add_argument("--format", required=True,
-                   help="openpose (detections); humancal, shelf, pose2sim, anipose, easymocap, colmap (cameras)")
-    p.add_argument("--out", required=True, help="output folder (detections, easymocap, colmap) or file")
+                   help="openpose (detections); humancal, shelf, pose2sim, anipose, easymocap, colmap (cameras); "
+                        "bvh, gltf, npz, obj (motions; see docs/formats.md)")
+    p.add_argument("--out", required=True, help="output folder (detections, motions, easymocap, colmap) or file")
+    p.add_argument("--frames", default=None,
+                   help="motions, obj only: START:STOP[:STEP] sequence frame numbers to write (STOP excluded)")
+    p.add_argument("--fps", type=float, default=None,
+                   help="motions: frame rate of the sequence (default: the dataset's, else 30)")
     p.add_argument("--cameras-asset", default=None,
                    help="which stored cameras table to export (default: extrinsics, the estimated cameras)")
     p.add_argument("--ground-truth", action="store_true",
