@@ -41,7 +41,8 @@ from humancal.camera import Camera, CameraRig
 from humancal.lifter import lifted_from_table
 from humancal.sequences import SequenceSpec
 
-__all__ = ["identity_metrics", "identity_confusion", "skeleton_metrics", "association_metric_table"]
+__all__ = ["identity_metrics", "identity_confusion", "skeleton_metrics", "skeletons_in_truth", "protocol_of",
+           "association_metric_table"]
 
 _KEYS = ["frame", "view", "det_id"]
 
@@ -136,12 +137,19 @@ def _idf1(d: pd.DataFrame) -> float:
 _SEQUENCE_ALIGNED = {"pcp_avg": "pcp_avg_sequence_aligned", "mpjpe_mm": "mpjpe_sequence_aligned_mm"}
 
 
-def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,
-                     gt_poses3d: pd.DataFrame, cameras: list[Camera], gt_cameras: list[Camera]) -> list[MetricRow]:
-    """``mpjpe_mm`` and ``pcp_avg`` of the skeletons (ids mapped to the true ones per frame, aligned into the
-    ground-truth world by the cameras' similarity), by the dataset's protocol; and ``pcp_avg_sequence_aligned``,
-    ``mpjpe_sequence_aligned_mm``: the same after one more similarity for the whole sequence, fitted on the
-    evaluated joints (evaluation only; it shows how much of the error is the placement of the world)."""
+def skeletons_in_truth(estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,
+                       cameras: list[Camera], gt_cameras: list[Camera]) -> pd.DataFrame:
+    """Estimated 3D keypoints as a ground-truth ``poses3d`` table: each skeleton takes, per frame, the true id of
+    most of its detections (a true person claimed twice in a frame keeps the skeleton with more views), and moves
+    into the ground-truth world by the similarity that aligns the estimated camera centres on the true ones.
+
+    Args:
+        estimated: ``associations`` table of the method.
+        skeletons: per (frame, person_id, joint) estimated keypoints (``skeletons3d`` columns; any table with
+            ``sequence, frame, person_id, joint, x_m, y_m, z_m, valid``).
+        truth: ground-truth ``associations``.
+        cameras, gt_cameras: the cameras the skeletons were made with, and the true ones.
+    """
     d = _labelled(estimated, truth)
     owner = _majority(d[(d["est"] >= 0) & (d["true"] >= 0)], ["frame", "est"], "true")
     owner = owner.sort_values(["frame", "true", "votes"], ascending=[True, True, False]).drop_duplicates(["frame", "true"])
@@ -153,14 +161,34 @@ def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.
                           "x_m": xyz[:, 0], "y_m": xyz[:, 1], "z_m": xyz[:, 2],
                           "valid": mapped["valid"].to_numpy(bool) & np.isfinite(xyz).all(1)})
     poses.loc[~poses["valid"], ["x_m", "y_m", "z_m"]] = 0.0
-    protocols = {"shelf": evaluate_shelf_poses, "synthetic": evaluate_canonical_poses}
-    if spec.kind not in protocols:
+    return poses
+
+
+PROTOCOLS = {"shelf": evaluate_shelf_poses, "synthetic": evaluate_canonical_poses}
+"""The 3D protocol of each dataset kind."""
+
+
+def protocol_of(spec: SequenceSpec):
+    """The 3D evaluation protocol of a sequence's dataset kind (ValueError where there is none)."""
+    if spec.kind not in PROTOCOLS:
         raise ValueError(f"sequence {spec.key}: no evaluation protocol for dataset kind {spec.kind!r}")
-    rows = [r for r in protocols[spec.kind](poses, gt_poses3d) if r.metric in ("mpjpe_mm", "pcp_avg")]
+    return PROTOCOLS[spec.kind]
+
+
+def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,
+                     gt_poses3d: pd.DataFrame, cameras: list[Camera], gt_cameras: list[Camera]) -> list[MetricRow]:
+    """``mpjpe_mm`` and ``pcp_avg`` of the skeletons (ids mapped to the true ones per frame, aligned into the
+    ground-truth world by the cameras' similarity: :func:`skeletons_in_truth`), by the dataset's protocol; and
+    ``pcp_avg_sequence_aligned``, ``mpjpe_sequence_aligned_mm``: the same after one more similarity for the whole
+    sequence, fitted on the evaluated joints (evaluation only; it shows how much of the error is the placement of
+    the world)."""
+    protocol = protocol_of(spec)
+    poses = skeletons_in_truth(estimated, skeletons, truth, cameras, gt_cameras)
+    rows = [r for r in protocol(poses, gt_poses3d) if r.metric in ("mpjpe_mm", "pcp_avg")]
     # The same skeletons in the frame that fits them best (one similarity for the sequence): what the
     # skeletons are worth apart from where the cameras put the world.
     rows += [MetricRow(_SEQUENCE_ALIGNED[r.metric], r.value, r.unit)
-             for r in protocols[spec.kind](poses, gt_poses3d, sequence_aligned=True) if r.metric in _SEQUENCE_ALIGNED]
+             for r in protocol(poses, gt_poses3d, sequence_aligned=True) if r.metric in _SEQUENCE_ALIGNED]
     return rows
 
 

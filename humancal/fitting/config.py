@@ -1,0 +1,92 @@
+"""Settings of the body fit (:func:`humancal.fitting.fit_bodies`): weights, robust scales, windows, iterations."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+__all__ = ["BodyFitConfig"]
+
+_INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iterations_global", "iterations_body")
+
+
+@dataclass(frozen=True)
+class BodyFitConfig:
+    """Weights and schedule of a body fit.
+
+    The data terms are Geman-McClure robust costs in units of the expected noise: a residual ``r`` costs
+    ``rho(r) = s^2 r^2 / (r^2 + s^2) / n^2`` with ``s`` the robust scale and ``n`` the noise scale, so small
+    residuals cost ``(r / n)^2`` (least squares in units of the noise) and an outlier at most ``(s / n)^2``.
+    Each term is a mean (data: over confident observations, weighted by confidence; priors: over their entries),
+    so weights do not change with the number of people, frames or views.
+
+    Attributes:
+        noise_px: expected 2D keypoint noise, pixels.
+        robust_scale_px: Geman-McClure scale of the reprojection term, pixels.
+        noise_3d_m: expected noise of the triangulated joints (the 3D initialisation stage), metres.
+        robust_scale_3d_m: Geman-McClure scale of the 3D stage, metres.
+        weight_latent: weight of ``mean(z^2)`` (the prior's N(0, I)).
+        weight_local_linear: weight of the mean squared latent second difference (the paper's local-linear term).
+        weight_rest: weight of the mean squared 6D offset from the reference pose (the no-prior fit only).
+        weight_shape: weight of the mean squared phenotype change from the initial (average adult) body.
+        weight_root_smooth: weight of the root's mean squared second difference (translation in units of
+            ``root_smooth_scale_m``; 6D orientation in units of ``root_smooth_scale_m`` per metre).
+        root_smooth_scale_m: the root's expected second difference, metres per frame^2.
+        weight_seam: weight of the mean squared 6D difference of two windows' decodings of the same frame.
+        window_frames: frames of one latent window (long sequences are cut into overlapping windows that are
+            decoded as one batch; a sequence no longer than this is one window).
+        window_overlap: frames shared by consecutive windows.
+        iterations_3d: Adam steps of the initialisation stage on the triangulated joints (shape, root, pose).
+        learning_rate_3d: Adam's initial learning rate there (decays linearly to a tenth).
+        iterations_global: L-BFGS iterations of the global stage (root orientation and translation on the 2D
+            detections, pose and shape held).
+        iterations_body: L-BFGS iterations of the body stage (everything on the 2D detections).
+        fit_shape: whether the phenotypes are fitted (else the average adult body).
+    """
+
+    noise_px: float = 5.0
+    robust_scale_px: float = 40.0
+    noise_3d_m: float = 0.03
+    robust_scale_3d_m: float = 0.15
+    weight_latent: float = 1e-3
+    weight_local_linear: float = 100.0
+    weight_rest: float = 1e-4
+    weight_shape: float = 1e-2
+    weight_root_smooth: float = 0.1
+    root_smooth_scale_m: float = 0.01
+    weight_seam: float = 100.0
+    window_frames: int = 64
+    window_overlap: int = 8
+    iterations_3d: int = 300
+    iterations_global: int = 10
+    iterations_body: int = 30
+    learning_rate_3d: float = 0.05
+    fit_shape: bool = True
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "fit_shape":
+                if not isinstance(value, bool):
+                    raise ValueError(f"BodyFitConfig.fit_shape={value!r} must be True or False")
+            elif f.name in _INTEGER_FIELDS:
+                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                    raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be an integer >= 0")
+            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be a finite number >= 0")
+        for name in ("noise_px", "robust_scale_px", "noise_3d_m", "robust_scale_3d_m", "root_smooth_scale_m"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"BodyFitConfig.{name} must be > 0")
+        if self.learning_rate_3d <= 0:
+            raise ValueError("BodyFitConfig.learning_rate_3d must be > 0")
+        if self.window_frames < 4 or not 0 <= self.window_overlap < self.window_frames // 2:
+            raise ValueError(f"BodyFitConfig: window_frames={self.window_frames} must be >= 4 and window_overlap="
+                             f"{self.window_overlap} in [0, window_frames / 2)")
+
+    def replace(self, **changes: Any) -> BodyFitConfig:
+        """A validated copy with some fields changed (ValueError for an unknown field)."""
+        unknown = sorted(set(changes) - {f.name for f in fields(self)})
+        if unknown:
+            raise ValueError(f"BodyFitConfig has no field(s) {unknown}")
+        return replace(self, **changes)

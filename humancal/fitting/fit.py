@@ -1,0 +1,323 @@
+"""Bodies and motions of every person fitted to the associated detections, cameras held fixed (the paper's III-E).
+
+Variables per person: the body shape (anny phenotypes, through a logistic map so they stay in [0, 1]), the
+root orientation (6D) and translation of every frame, and the body pose of every frame: the motion prior's
+latent codes (T x 32, decoder frozen) or, for the no-prior baseline, the 21 bones' 6D rotations.
+
+Objective (``BodyFitConfig`` documents the units): a confidence-weighted Geman-McClure reprojection term of the
+23 canonical keypoints in every view, through the shared camera model (``humancal.geometry.projection``); the
+latent prior ``mean(z^2)``; the local-linear term ``mean((z[t+1] - 2 z[t] + z[t-1])^2)``; a shape prior; a root
+smoothness term; and, for long sequences cut into windows (``humancal.fitting.windows``), a seam term.
+
+Schedule: the root of each frame starts from a rigid alignment of the average body onto the triangulated
+joints (``skeletons3d``); then three stages run on all people and all windows at once:
+
+1. ``fit3d``: shape, root and body pose on the triangulated joints, by Adam (cheap and well conditioned, but
+   thousands of nearly separable per-frame problems far from their solution, where one L-BFGS line search for
+   all of them converged several times slower in the trials on synthetic scenes); the latents
+   start from the prior's encoding of the reference pose. (Starting them from the encoding of a raw-angle
+   inverse kinematics was tried and is worse: its poses are far from the prior's, and decode 90 mm away.)
+2. ``global``: root orientation and translation on the 2D detections, body held, by L-BFGS;
+3. ``body``: everything on the 2D detections, by L-BFGS.
+
+Per-frame work runs on the body model's compact keypoint path; no mesh is built here.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from humancal.body import BodyModel
+from humancal.camera import CameraRig
+from humancal.fitting.config import BodyFitConfig
+from humancal.fitting.motions import FittedMotions
+from humancal.fitting.observations import BodyObservations, FittingInputError
+from humancal.fitting.windows import window_layout
+from humancal.prior.config import NUM_PRIOR_BONES
+from humancal.prior.fitting import KeypointObservations, initial_root
+from humancal.prior.model import MotionVAE, identity_pose6d, pose6d_to_rotmats, rotmats_to_pose6d, with_root
+
+__all__ = ["BodyFitResult", "fit_bodies", "INITIAL_PHENOTYPES", "STAGES"]
+
+log = logging.getLogger(__name__)
+
+INITIAL_PHENOTYPES = (0.5, 2.0 / 3.0, 0.5, 0.5, 0.5, 0.5)
+"""Where every body starts: an average young adult (anny's gender 0.5, age 2/3 = 25 years, the rest at 0.5)."""
+
+STAGES = ("fit3d", "global", "body")
+
+
+@dataclass(frozen=True)
+class BodyFitResult:
+    """A body fit's output.
+
+    Attributes:
+        motions: the fitted people (``FittedMotions``).
+        latents: (P, W, L, latent_dim) the fitted latent windows (prior fits), else None.
+        stage_seconds: wall seconds of ``prepare``, each stage of ``STAGES`` and ``total``.
+        loss_terms: every term of the objective after the last stage (unweighted), and ``total`` (weighted).
+        reprojection_error_px: mean pixel distance between the fitted keypoints and the detected ones, over every
+            detected keypoint (score > 0) in front of its camera.
+        warnings: people left out, and other things that did not stop the fit.
+    """
+
+    motions: FittedMotions
+    latents: np.ndarray | None
+    stage_seconds: dict[str, float]
+    loss_terms: dict[str, float]
+    reprojection_error_px: float
+    warnings: tuple[str, ...] = ()
+
+
+def _geman_mcclure(r2: Tensor, scale: float, noise: float) -> Tensor:
+    """Robust cost of squared residuals ``r2`` (module docstring of ``humancal.fitting.config``)."""
+    s2 = scale * scale
+    return s2 * r2 / (r2 + s2) / (noise * noise)
+
+
+def _weighted_mean(values: Tensor, weights: Tensor) -> Tensor:
+    return (values * weights).sum() / weights.sum().clamp(min=1e-12)
+
+
+def _mean_square(x: Tensor) -> Tensor:
+    return (x**2).mean() if x.numel() else x.new_zeros(())
+
+
+def _second_difference(x: Tensor, dim: int) -> Tensor:
+    n = x.shape[dim]
+    if n < 3:
+        return x.new_zeros(0)
+    return x.narrow(dim, 2, n - 2) - 2.0 * x.narrow(dim, 1, n - 2) + x.narrow(dim, 0, n - 2)
+
+
+class _Problem:
+    """The variables and terms of one fit (internal: :func:`fit_bodies` drives it)."""
+
+    def __init__(self, body: BodyModel, observations: BodyObservations, rig: CameraRig, prior: MotionVAE | None,
+                 config: BodyFitConfig) -> None:
+        self.body, self.config, self.prior = body, config, prior
+        to = self.to = dict(dtype=body.dtype, device=body.device)
+        P, T = observations.num_people, observations.num_frames
+        self.P, self.T = P, T
+        self.rig = rig.to_torch(**to)
+        self.keypoints_px = torch.as_tensor(observations.keypoints_px, **to)
+        self.confidence = torch.as_tensor(observations.confidence, **to)
+        self.joints = torch.as_tensor(observations.joints_world_m, **to)
+        self.joints_weight = torch.as_tensor(observations.joints_valid, **to)
+        self.layout = window_layout(T, config.window_frames, config.window_overlap)
+        self.phenotypes0 = torch.tensor(INITIAL_PHENOTYPES, **to).expand(P, -1).clone()
+        self.shape_logit = torch.logit(self.phenotypes0).clone().requires_grad_(config.fit_shape)
+
+        with torch.no_grad():
+            rest = body.rest_skeleton(self.phenotypes0)
+            points = KeypointObservations(self.joints, torch.as_tensor(observations.joints_valid, device=body.device),
+                                          noise_scale=config.noise_3d_m)
+            root_R, root_t = initial_root(body, rest, points)
+        self.root6d = rotmats_to_pose6d(root_R).clone().requires_grad_()
+        self.translation = root_t.clone().requires_grad_()
+        identity = identity_pose6d(**to)
+        # The body pose starts as the reference pose in raw 6D rotations; a prior fit swaps them for their
+        # latent codes (:meth:`encode_pose`).
+        self.pose_params = identity.expand(P, T, NUM_PRIOR_BONES, 6).clone().requires_grad_()
+        self.latent = False
+        self.identity6d = identity
+
+    # ---------------------------------------------------------------------------------------------- model
+
+    def encode_pose(self) -> None:
+        """Replace the raw 6D body pose by the prior's encoding of it, one latent window at a time."""
+        if self.prior is None or self.latent:
+            return
+        with torch.no_grad():
+            # the encoder reads exact 6D forms: normalise the raw ones first (Gram-Schmidt and back)
+            pose6d = rotmats_to_pose6d(pose6d_to_rotmats(self.pose_params.detach()))
+            windows = self.layout.split(pose6d)  # (P, W, L, 21, 6)
+            P, W, L = windows.shape[:3]
+            mu, _ = self.prior.encode(windows.reshape(P * W, L, NUM_PRIOR_BONES, 6))
+        self.pose_params = mu.reshape(P, W, L, -1).clone().requires_grad_()
+        self.latent = True
+
+    def phenotypes(self) -> Tensor:
+        return torch.sigmoid(self.shape_logit)
+
+    def pose6d(self) -> tuple[Tensor, Tensor | None]:
+        """(P, T, 21, 6) body pose of every frame, and the (P, S, 21, 6) seam differences (None: no windows)."""
+        if not self.latent:
+            return self.pose_params, None
+        P, W, L, D = self.pose_params.shape
+        decoded = self.prior.decode(self.pose_params.reshape(P * W, L, D)).reshape(P, W, L, NUM_PRIOR_BONES, 6)
+        return self.layout.assemble(decoded), self.layout.seam_difference(decoded)
+
+    def bone_rotmats(self, pose6d: Tensor) -> Tensor:
+        return with_root(pose6d_to_rotmats(pose6d), pose6d_to_rotmats(self.root6d))
+
+    def keypoints(self) -> tuple[Tensor, Tensor | None, Tensor]:
+        """(P, T, 23, 3) keypoints, the seam differences and the (P, T, 22, 3, 3) bone rotations."""
+        pose6d, seam = self.pose6d()
+        rest = self.body.rest_skeleton(self.phenotypes())
+        rotmats = self.bone_rotmats(pose6d)
+        return self.body.keypoints(rest, rotmats, self.translation), seam, rotmats
+
+    def reprojection(self, keypoints: Tensor) -> tuple[Tensor, Tensor]:
+        """(V, P, T, 23) squared pixel residuals and the weights (confidence, 0 behind a camera)."""
+        pixels, _, in_front = self.rig.project(keypoints.reshape(-1, 3))
+        pixels = pixels.reshape(-1, self.P, self.T, keypoints.shape[2], 2)
+        r2 = ((pixels - self.keypoints_px) ** 2).sum(-1)
+        weights = self.confidence * in_front.reshape(r2.shape).to(self.confidence.dtype)
+        return r2, weights
+
+    # ---------------------------------------------------------------------------------------------- terms
+
+    def terms(self, data: str) -> dict[str, Tensor]:
+        """Every (unweighted) term; ``data`` is ``"3d"`` (triangulated joints) or ``"2d"`` (detections)."""
+        c = self.config
+        keypoints, seam, _ = self.keypoints()
+        out: dict[str, Tensor] = {}
+        if data == "3d":
+            r2 = ((keypoints - self.joints) ** 2).sum(-1)
+            out["data_3d"] = _weighted_mean(_geman_mcclure(r2, c.robust_scale_3d_m, c.noise_3d_m), self.joints_weight)
+        else:
+            r2, weights = self.reprojection(keypoints)
+            out["reprojection"] = _weighted_mean(_geman_mcclure(r2, c.robust_scale_px, c.noise_px), weights)
+        scale = c.root_smooth_scale_m
+        out["root_smooth"] = _mean_square(_second_difference(self.translation, 1) / scale) + \
+            _mean_square(_second_difference(self.root6d, 1) / scale)
+        out["shape"] = _mean_square(self.phenotypes() - self.phenotypes0)
+        if self.latent:
+            out["latent"] = _mean_square(self.pose_params)
+            out["local_linear"] = _mean_square(_second_difference(self.pose_params, 2))
+            out["seam"] = _mean_square(seam) if seam is not None else keypoints.new_zeros(())
+        else:
+            out["rest"] = _mean_square(self.pose_params - self.identity6d)
+        return out
+
+    def total(self, terms: dict[str, Tensor]) -> Tensor:
+        c = self.config
+        weights = {"data_3d": 1.0, "reprojection": 1.0, "root_smooth": c.weight_root_smooth, "shape": c.weight_shape,
+                   "latent": c.weight_latent, "local_linear": c.weight_local_linear, "seam": c.weight_seam,
+                   "rest": c.weight_rest}
+        return sum(weights[name] * value for name, value in terms.items())
+
+    def stage_variables(self, stage: str) -> list[Tensor]:
+        shape = [self.shape_logit] if self.config.fit_shape else []
+        if stage == "global":
+            return [self.root6d, self.translation]
+        return [*shape, self.root6d, self.translation, self.pose_params]
+
+
+def _run_stage(problem: _Problem, stage: str, iterations: int,
+               progress: Callable[[str, int, float], None] | None) -> dict[str, float]:
+    """Adam (``fit3d``) or L-BFGS with a strong-Wolfe line search (the 2D stages) on one stage's variables; the
+    last terms, unweighted (and ``total``, weighted)."""
+    data = "3d" if stage == "fit3d" else "2d"
+    variables = problem.stage_variables(stage)
+    if iterations == 0:
+        with torch.no_grad():
+            return {k: float(v) for k, v in problem.terms(data).items()}
+    if stage != "fit3d":  # refinement from a good start: quasi-Newton
+        optimizer = torch.optim.LBFGS(variables, lr=1.0, max_iter=iterations, history_size=10,
+                                      line_search_fn="strong_wolfe", tolerance_grad=1e-9, tolerance_change=1e-12)
+        steps, schedule = 1, None
+    else:  # thousands of nearly separable per-frame problems far from their solution: Adam's per-variable steps
+        optimizer = torch.optim.Adam(variables, lr=problem.config.learning_rate_3d)
+        steps = iterations
+        schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda i: 1.0 - 0.9 * i / iterations)
+    calls = [0]
+
+    def closure() -> Tensor:
+        optimizer.zero_grad(set_to_none=True)
+        loss = problem.total(problem.terms(data))
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"body fit, stage {stage}: the objective became {float(loss)}")
+        loss.backward()
+        calls[0] += 1
+        if progress is not None:
+            progress(stage, calls[0], float(loss.detach()))
+        return loss
+
+    snapshot = [v.detach().clone() for v in variables]
+    try:
+        for _ in range(steps):
+            optimizer.step(closure)
+            if schedule is not None:
+                schedule.step()
+    except FloatingPointError as error:  # a line search that left the valid region: back to the stage's start
+        log.warning("%s; the stage's variables are restored", error)
+        with torch.no_grad():
+            for v, s in zip(variables, snapshot):
+                v.copy_(s)
+    with torch.no_grad():
+        terms = problem.terms(data)
+        terms["total"] = problem.total(terms)
+        return {k: float(v) for k, v in terms.items()}
+
+
+def fit_bodies(
+    body: BodyModel,
+    observations: BodyObservations,
+    rig: CameraRig,
+    prior: MotionVAE | None,
+    config: BodyFitConfig = BodyFitConfig(),
+    *,
+    fps: float = 30.0,
+    warnings: tuple[str, ...] = (),
+    progress: Callable[[str, int, float], None] | None = None,
+) -> BodyFitResult:
+    """Fit every person's shape and motion to their detections, the cameras held fixed (module docstring).
+
+    Args:
+        body: the body model (its dtype and device are the fit's).
+        observations: the people's detections and triangulated joints (:func:`body_observations`).
+        rig: the V cameras, held fixed.
+        prior: the motion VAE whose latents are fitted (the default prior, or the per-frame variant); None fits
+            raw joint angles (the no-prior baseline). Its weights are not changed.
+        config: weights and schedule.
+        fps: the sequence's frame rate (stored with the motions).
+        warnings: warnings of the inputs (e.g. people left out), passed through to the result.
+        progress: called as ``progress(stage, evaluation, loss)`` after every objective evaluation.
+
+    Returns:
+        The :class:`BodyFitResult`.
+
+    Raises:
+        FittingInputError: observations of another number of views than the rig, or no detections at all.
+    """
+    if observations.num_views != len(rig):
+        raise FittingInputError(f"body fit: detections of {observations.num_views} views, but {len(rig)} cameras")
+    if not (observations.confidence > 0).any():
+        raise FittingInputError("body fit: no detected keypoint with a score > 0 among the associated detections")
+    seconds: dict[str, float] = {}
+    start = time.perf_counter()
+    if prior is not None:
+        prior = prior.to(dtype=body.dtype, device=body.device).eval()
+    problem = _Problem(body, observations, rig, prior, config)
+    problem.encode_pose()  # prior fits: the body pose is the latent motion, from the encoding of the reference pose
+    seconds["prepare"] = time.perf_counter() - start
+    terms: dict[str, float] = {}
+    for stage, iterations in zip(STAGES, (config.iterations_3d, config.iterations_global, config.iterations_body)):
+        stage_start = time.perf_counter()
+        terms = _run_stage(problem, stage, iterations, progress)
+        seconds[stage] = time.perf_counter() - stage_start
+        log.info("body fit, %s: %s in %.1f s", stage, ", ".join(f"{k} {v:.4g}" for k, v in terms.items()),
+                 seconds[stage])
+    with torch.no_grad():
+        keypoints, _, rotmats = problem.keypoints()
+        r2, weights = problem.reprojection(keypoints)
+        detected = weights > 0
+        reprojection_px = float(r2[detected].sqrt().mean()) if detected.any() else float("nan")
+        phenotypes = problem.phenotypes()
+    seconds["total"] = time.perf_counter() - start
+    as_np = lambda t: t.detach().cpu().double().numpy()  # noqa: E731
+    motions = FittedMotions(
+        person_ids=observations.person_ids.astype(np.int64), frames=observations.frames.astype(np.int64),
+        present=observations.present.copy(), phenotypes=as_np(phenotypes), bone_rotmats_local=as_np(rotmats),
+        root_translation_m=as_np(problem.translation), keypoints_world_m=as_np(keypoints), fps=float(fps))
+    latents = as_np(problem.pose_params) if problem.latent else None
+    return BodyFitResult(motions, latents, seconds, terms, reprojection_px, tuple(warnings))

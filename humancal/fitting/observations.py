@@ -1,0 +1,160 @@
+"""What a body fit sees: each person's 2D keypoints in every view, and their triangulated 3D joints.
+
+Built from the association's output (``associations``: the person of every detection; ``skeletons3d``: each
+person's triangulated joints), never from ground truth. Arrays are dense over (view, person, frame) so that the
+fit is one batched computation; absent observations have confidence 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from humancal.associations import Associations
+from humancal.detections import DenseDetections
+from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
+
+__all__ = ["BodyObservations", "FittingInputError", "body_observations"]
+
+
+class FittingInputError(ValueError):
+    """The inputs of a body fit cannot give a fit (no people, a person seen in one view only, non-finite values);
+    the message names the table, the person and what is wrong."""
+
+
+@dataclass(frozen=True)
+class BodyObservations:
+    """The detections of P tracked people over T frames, seen by V views.
+
+    Attributes:
+        person_ids: (P,) the association's person ids.
+        frames: (T,) consecutive frame numbers, the first to the last frame any person was seen.
+        keypoints_px: (V, P, T, 23, 2) canonical keypoints in pixels (0 where not observed).
+        confidence: (V, P, T, 23) detector confidence in [0, 1]; 0 where not observed.
+        joints_world_m: (P, T, 23, 3) triangulated joints (``skeletons3d``), world metres (0 where not valid).
+        joints_valid: (P, T, 23) True where ``joints_world_m`` holds a triangulated (or gap-filled) joint.
+        present: (P, T) True from each person's first to last frame with a detection.
+    """
+
+    person_ids: np.ndarray
+    frames: np.ndarray
+    keypoints_px: np.ndarray
+    confidence: np.ndarray
+    joints_world_m: np.ndarray
+    joints_valid: np.ndarray
+    present: np.ndarray
+
+    @property
+    def num_views(self) -> int:
+        return int(self.keypoints_px.shape[0])
+
+    @property
+    def num_people(self) -> int:
+        return int(len(self.person_ids))
+
+    @property
+    def num_frames(self) -> int:
+        return int(len(self.frames))
+
+    def select_people(self, rows: np.ndarray) -> BodyObservations:
+        """The observations of a subset of the people (``rows`` index the person axis)."""
+        rows = np.asarray(rows)
+        return BodyObservations(self.person_ids[rows], self.frames, self.keypoints_px[:, rows],
+                                self.confidence[:, rows], self.joints_world_m[rows], self.joints_valid[rows],
+                                self.present[rows])
+
+
+def body_observations(detections: DenseDetections, associations: pd.DataFrame, skeletons3d: pd.DataFrame,
+                      num_views: int, *, min_views: int = 2, min_frames: int = 3) -> tuple[BodyObservations, list[str]]:
+    """Dense per-person observations from the association's tables.
+
+    People who are seen in fewer than ``min_views`` views over the whole sequence, or in fewer than ``min_frames``
+    frames, cannot be fitted reliably (a single view leaves depth unknown; three frames give a motion prior
+    nothing): they are left out, with a warning naming them.
+
+    Args:
+        detections: every detection of the sequence (2D keypoints and confidences).
+        associations: ``associations`` table (the person of each detection, -1 rejected).
+        skeletons3d: ``skeletons3d`` table (each person's triangulated joints).
+        num_views: V, the number of cameras.
+        min_views: fewest distinct views a person must be seen in.
+        min_frames: fewest frames a person must be seen in.
+
+    Returns:
+        The observations and the warnings (people left out, and why).
+
+    Raises:
+        FittingInputError: no person remains, a detection's keypoints are not finite where confident, or the
+            skeletons name a person the associations do not.
+    """
+    person_of = Associations.from_table(associations).person_of_detections(detections)
+    used = person_of >= 0
+    if not used.any():
+        raise FittingInputError("associations: no detection belongs to a person (every person_id is -1): "
+                                "nothing to fit")
+    warnings: list[str] = []
+    candidates = np.unique(person_of[used])
+    keep = []
+    for pid in candidates.tolist():
+        mine = person_of == pid
+        views, frames = np.unique(detections.view[mine]), np.unique(detections.frame[mine])
+        if len(views) < min_views or len(frames) < min_frames:
+            warnings.append(f"person {pid} left out of the body fit: seen in {len(views)} view(s) over {len(frames)} "
+                            f"frame(s) (needs >= {min_views} views and >= {min_frames} frames)")
+            continue
+        keep.append(pid)
+    if not keep:
+        raise FittingInputError(f"no person can be fitted: {'; '.join(warnings)}")
+    person_ids = np.asarray(keep, dtype=np.int64)
+    rows = np.flatnonzero(np.isin(person_of, person_ids))
+    first, last = int(detections.frame[rows].min()), int(detections.frame[rows].max())
+    frames = np.arange(first, last + 1)
+    P, T = len(person_ids), len(frames)
+    if (detections.view[rows] >= num_views).any() or (detections.view[rows] < 0).any():
+        raise FittingInputError(f"detections: view numbers must be 0..{num_views - 1} (the cameras), got "
+                                f"{sorted(set(detections.view[rows].tolist()))}")
+    keypoints = np.zeros((num_views, P, T, NUM_JOINTS, 2))
+    confidence = np.zeros((num_views, P, T, NUM_JOINTS))
+    p_idx = np.searchsorted(person_ids, person_of[rows])
+    t_idx = detections.frame[rows] - first
+    v_idx = detections.view[rows]
+    scores = np.where(detections.valid[rows], detections.scores[rows], 0.0)
+    points = detections.keypoints_px[rows]
+    bad = (scores > 0) & ~np.isfinite(points).all(-1)
+    if bad.any():
+        r = rows[np.argwhere(bad)[0][0]]
+        raise FittingInputError(f"detections: frame {detections.frame[r]}, view {detections.view[r]}, det_id "
+                                f"{detections.det_id[r]} has a non-finite keypoint with score > 0 (x_px, y_px must "
+                                f"be finite numbers wherever score > 0)")
+    # One detection per (view, person, frame): where the association gave a person two, keep the more confident.
+    order = np.argsort(scores.sum(-1), kind="stable")
+    keypoints[v_idx[order], p_idx[order], t_idx[order]] = np.nan_to_num(points[order])
+    confidence[v_idx[order], p_idx[order], t_idx[order]] = np.clip(scores[order], 0.0, 1.0)
+    present = np.zeros((P, T), bool)
+    seen = np.zeros((P, T), bool)
+    seen[p_idx, t_idx] = True
+    for p in range(P):
+        on = np.flatnonzero(seen[p])
+        present[p, on[0]: on[-1] + 1] = True
+
+    joints = np.zeros((P, T, NUM_JOINTS, 3))
+    joints_valid = np.zeros((P, T, NUM_JOINTS), bool)
+    sk = skeletons3d[skeletons3d["person_id"].isin(person_ids) & skeletons3d["frame"].between(first, last)]
+    unknown = sorted(set(skeletons3d["person_id"].unique().tolist()) - set(candidates.tolist()))
+    if unknown:
+        raise FittingInputError(f"skeletons3d: person ids {unknown[:5]} are in no association")
+    if len(sk):
+        sp = np.searchsorted(person_ids, sk["person_id"].to_numpy())
+        st = sk["frame"].to_numpy() - first
+        sj = sk["joint"].map(JOINT_INDEX).to_numpy()
+        xyz = sk[["x_m", "y_m", "z_m"]].to_numpy(np.float64)
+        ok = sk["valid"].to_numpy(bool) & np.isfinite(xyz).all(-1)
+        joints[sp[ok], st[ok], sj[ok]] = xyz[ok]
+        joints_valid[sp[ok], st[ok], sj[ok]] = True
+    no_3d = [int(person_ids[p]) for p in range(P) if not joints_valid[p].any()]
+    if no_3d:
+        raise FittingInputError(f"skeletons3d: persons {no_3d} have no valid triangulated joint: a body cannot be "
+                                f"placed without one")
+    return BodyObservations(person_ids, frames, keypoints, confidence, joints, joints_valid, present), warnings
