@@ -37,6 +37,7 @@ from humancal.prior.train import TrainedPrior, clip_rest_skeletons, reconstructi
 from humancal.prior.weights import (
     PRIOR_WEIGHTS_FORMAT,
     SHIPPED_PRIOR_STEM,
+    SHIPPED_VARIANT_STEMS,
     PriorWeightsError,
     load_prior,
     read_prior_info,
@@ -73,6 +74,7 @@ __all__ = [
     "train_motion_prior",
     "PRIOR_WEIGHTS_FORMAT",
     "SHIPPED_PRIOR_STEM",
+    "SHIPPED_VARIANT_STEMS",
     "PriorWeightsError",
     "load_prior",
     "read_prior_info",

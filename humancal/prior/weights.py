@@ -34,6 +34,7 @@ from humancal.weight_files import weights_pair_paths, write_atomically
 __all__ = [
     "PRIOR_WEIGHTS_FORMAT",
     "SHIPPED_PRIOR_STEM",
+    "SHIPPED_VARIANT_STEMS",
     "PriorWeightsError",
     "load_prior",
     "read_prior_info",
@@ -46,6 +47,13 @@ PRIOR_WEIGHTS_FORMAT = "humancal.motion_prior/1"
 
 SHIPPED_PRIOR_STEM = Path(__file__).resolve().parent.parent / "weights" / "motion_prior"
 """``humancal/weights/motion_prior``: the stem of the shipped ``.safetensors`` / ``.json`` pair."""
+
+SHIPPED_VARIANT_STEMS = {
+    "motion_prior": SHIPPED_PRIOR_STEM,
+    "per_frame": SHIPPED_PRIOR_STEM.with_name("motion_prior_per_frame"),
+}
+"""The variants humancal ships weights for, and their stems: the default prior, and the per-frame pose prior that
+the body fit's ``fit_per_frame_prior`` baseline uses. The other variants are trained on request."""
 
 _REQUIRED = ("format", "config", "digest", "history", "train_seconds", "train_subjects", "held_out_subjects",
              "held_out", "data_digest")
@@ -200,6 +208,13 @@ def load_prior(path: str | Path, variant: str | None = None) -> tuple[MotionVAE,
     return model, info
 
 
-def shipped_prior() -> tuple[MotionVAE, dict[str, Any]]:
-    """The default prior shipped with the package: ``load_prior(SHIPPED_PRIOR_STEM, "motion_prior")``."""
-    return load_prior(SHIPPED_PRIOR_STEM, "motion_prior")
+def shipped_prior(variant: str = "motion_prior") -> tuple[MotionVAE, dict[str, Any]]:
+    """A prior shipped with the package: ``load_prior(SHIPPED_VARIANT_STEMS[variant], variant)``.
+
+    Raises:
+        PriorWeightsError: no weights of that variant ship (naming the ones that do), or the files are damaged.
+    """
+    if variant not in SHIPPED_VARIANT_STEMS:
+        raise PriorWeightsError(f"no shipped weights of the prior variant {variant!r}; humancal ships "
+                                f"{sorted(SHIPPED_VARIANT_STEMS)} (train others: humancal train prior --variant V)")
+    return load_prior(SHIPPED_VARIANT_STEMS[variant], variant)

@@ -132,6 +132,15 @@ def test_shipped_prior_is_valid():
     assert SHIPPED_PRIOR_STEM.with_suffix(".safetensors").stat().st_size < 20e6
 
 
+def test_shipped_per_frame_prior_is_valid_and_unknown_variants_are_refused():
+    model, info = shipped_prior("per_frame")
+    assert info["config"]["variant"] == "per_frame" and model.latent_dim == 32 and not model.config.temporal
+    assert info["held_out"]["mpjpe_mm"] <= 21.0  # measured 19.6 mm (docs/motion_prior.md)
+    assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
+    with pytest.raises(PriorWeightsError, match=r"no shipped weights of the prior variant 'no_skip'"):
+        shipped_prior("no_skip")
+
+
 REVERSAL_TOLERANCE_MM = 3.0
 """Mean keypoint distance allowed between decode(reversed latent) and the reversed decoding (shipped prior, on
 these procedural motions: measured 1.90 mm, and 1.88 mm when the reversed motion is encoded; docs/motion_prior.md).
