@@ -7,22 +7,31 @@ import dagster as dg
 import pandas as pd
 
 from assets.association import latest_association_seconds
+from assets.bodies import fitting_prior, latest_fit_seconds
+from assets.settings import BodyFitSettings
 from assets.checks import latest_check_outcomes
 from assets.common import png_metadata, sequence_asset, table_output
 from evaluation.association_metrics import association_metric_table
+from evaluation.body_metrics import BodyFitInputs, body_metric_table
 from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
 from evaluation.rig_plot import plot_rig_comparison
 from evaluation.sequence_metrics import sequence_metric_table
 from humancal.camera import cameras_from_table
+from humancal.inputs import sequence_fps
 from humancal.tables import empty_table
+from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
+from resources.torch import TorchResource
 
 
-@sequence_asset("metrics", code_version="11")
+@sequence_asset("metrics", code_version="12")
 def metric_tables(
     context: dg.AssetExecutionContext,
+    config: BodyFitSettings,
     datasets: DatasetsResource,
+    body_model: BodyModelResource,
+    torch_runtime: TorchResource,
     gt_camera_triangulation: pd.DataFrame,
     raw_detections: pd.DataFrame,
     detections: pd.DataFrame,
@@ -33,9 +42,13 @@ def metric_tables(
     gt_people: pd.DataFrame,
     associations: pd.DataFrame,
     skeletons3d: pd.DataFrame,
+    fitted_motions: pd.DataFrame,
+    gt_motions: pd.DataFrame,
 ) -> dg.Output:
     """MPJPE, PCP and reprojection error of each method; the lifter's 3D and height errors; the camera
-    initialisation's focal, position, angle and reprojection errors; detection grouping on real datasets.
+    initialisation's focal, position, angle and reprojection errors; detection grouping on real datasets; who is
+    who; the fitted bodies against the triangulated skeletons (``evaluation.body_metrics``; the settings are the
+    ``fitted_motions`` asset's: give both the same run config to change them).
     The camera rows name the checks of ``extrinsics`` that its cameras failed (column ``failed_checks``)."""
     spec = datasets.spec(context.partition_key)
     gt = cameras_from_table(gt_cameras)
@@ -68,6 +81,17 @@ def metric_tables(
                 seconds=latest_association_seconds(context.instance, context.partition_key),
                 lifted_detections=detections, cameras=estimated, gt_associations=gt_associations,
                 gt_poses3d=gt_poses3d, gt_cameras=gt, failed_checks=failed))
+            body = body_model.get()
+            models = BodyFitInputs(body=body, prior=fitting_prior(), per_frame_prior=fitting_prior("per_frame"),
+                                   config=config.to_library(), fps=sequence_fps(spec)[0])
+            with torch_runtime.applied():
+                parts.append(body_metric_table(
+                    spec, models, fitted_motions=fitted_motions,
+                    fit_seconds=latest_fit_seconds(context.instance, context.partition_key),
+                    associations=associations, skeletons3d=skeletons3d, lifted_detections=detections,
+                    detections=raw_detections, cameras=estimated, gt_associations=gt_associations,
+                    gt_poses3d=gt_poses3d, gt_cameras=gt, gt_motions=gt_motions, failed_checks=failed,
+                    log=context.log.info))
     else:
         context.log.info(f"{spec.key}: no known cameras: no metric rows (the calibrated cameras are in extrinsics)")
     table = pd.concat(parts, ignore_index=True) if parts else empty_table("metrics")

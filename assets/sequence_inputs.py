@@ -19,6 +19,8 @@ _OUTPUTS = {
     "gt_poses3d": ("poses3d", "gt_poses3d", "Ground-truth 3D joints in the world frame (evaluation only)."),
     "gt_associations": ("associations", "gt_associations", "Ground-truth person id of each detection (evaluation only)."),
     "gt_people": ("people", "gt_people", "Ground-truth body shape of each person (empty where unknown)."),
+    "gt_motions": ("motions", "gt_motions", "Ground-truth body-model motions (synthetic scenes; empty where unknown; "
+                                            "evaluation only)."),
 }
 CODE_VERSION = "2"
 

@@ -18,8 +18,10 @@ from pydantic import Field
 
 from humancal.association import AffinityConfig, SmoothingConfig, TrackingConfig
 from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig
+from humancal.fitting import BodyFitConfig
 
-__all__ = ["IntrinsicsSettings", "ExtrinsicsSettings", "AssociationSettings", "attribute_docs", "library_field"]
+__all__ = ["IntrinsicsSettings", "ExtrinsicsSettings", "AssociationSettings", "BodyFitSettings", "attribute_docs",
+           "library_field"]
 
 
 def attribute_docs(cls: type) -> dict[str, str]:
@@ -167,3 +169,37 @@ class AssociationSettings(dg.Config):
                                     acceleration_mps2=values.pop("smoothing_acceleration_mps2"),
                                     max_fill_frames=values.pop("smoothing_max_fill_frames"))
         return TrackingConfig(affinity=affinity, smoothing=smoothing, **values)
+
+
+_B = BodyFitConfig
+
+
+class BodyFitSettings(dg.Config):
+    """Settings of the ``fitted_motions`` asset (:class:`humancal.fitting.BodyFitConfig`); the metric table's body
+    rows fit with the same settings."""
+
+    PIPELINE_DEFAULTS: ClassVar[dict[str, Any]] = {}
+
+    noise_px: float = library_field(_B, "noise_px")
+    robust_scale_px: float = library_field(_B, "robust_scale_px")
+    noise_3d_m: float = library_field(_B, "noise_3d_m")
+    robust_scale_3d_m: float = library_field(_B, "robust_scale_3d_m")
+    weight_latent: float = library_field(_B, "weight_latent")
+    weight_local_linear: float = library_field(_B, "weight_local_linear")
+    weight_local_linear_3d: float = library_field(_B, "weight_local_linear_3d")
+    weight_rest: float = library_field(_B, "weight_rest")
+    weight_shape: float = library_field(_B, "weight_shape")
+    weight_root_smooth: float = library_field(_B, "weight_root_smooth")
+    root_smooth_scale_m: float = library_field(_B, "root_smooth_scale_m")
+    weight_seam: float = library_field(_B, "weight_seam")
+    window_frames: int = library_field(_B, "window_frames")
+    window_overlap: int = library_field(_B, "window_overlap")
+    iterations_3d: int = library_field(_B, "iterations_3d")
+    learning_rate_3d: float = library_field(_B, "learning_rate_3d")
+    iterations_global: int = library_field(_B, "iterations_global")
+    iterations_body: int = library_field(_B, "iterations_body")
+    fit_shape: bool = library_field(_B, "fit_shape")
+
+    def to_library(self) -> BodyFitConfig:
+        """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""
+        return _to_library(self, BodyFitConfig)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
@@ -13,7 +13,10 @@ from humancal.sequences import SequenceSpec
 from humancal.settings import DATA_DIR_ENV, DataRootError
 from humancal.tables import empty_table, validate_table
 
-__all__ = ["SequenceInputs", "load_sequence_inputs"]
+__all__ = ["DEFAULT_FPS", "SequenceInputs", "load_sequence_inputs", "sequence_fps"]
+
+DEFAULT_FPS = 30.0
+"""The frame rate assumed where a sequence does not say (a capture without ``fps``; Shelf)."""
 
 log = logging.getLogger(__name__)
 
@@ -31,6 +34,8 @@ class SequenceInputs:
         gt_associations: ground-truth identity of each detection, -1 for false positives (evaluation
             and the identified baselines only).
         gt_people: ground-truth body shape per person (empty where unknown).
+        gt_motions: ground-truth body-model motions (synthetic scenes: the anny parameters the people were made
+            with; empty where unknown; evaluation only).
     """
 
     detections: pd.DataFrame
@@ -39,6 +44,21 @@ class SequenceInputs:
     gt_poses3d: pd.DataFrame
     gt_associations: pd.DataFrame
     gt_people: pd.DataFrame
+    gt_motions: pd.DataFrame = field(default_factory=lambda: empty_table("motions"))
+
+
+def sequence_fps(spec: SequenceSpec) -> tuple[float, str]:
+    """The frame rate of a sequence, frames per second, and where it comes from: its datasets entry's ``fps``
+    option, a synthetic preset's rate, or :data:`DEFAULT_FPS` (Shelf's files do not state one)."""
+    if spec.options.get("fps") is not None:
+        return float(spec.options["fps"]), f"the {spec.kind} options of {spec.key}"
+    if spec.kind == "synthetic":
+        from humancal.synthetic import preset
+
+        options = dict(spec.options)
+        name = options.pop("preset", "demo")
+        return float(preset(name, **options).fps), f"synthetic preset {name!r}"
+    return DEFAULT_FPS, f"default: {spec.key} states no frame rate"
 
 
 def views_from_cameras(cameras: pd.DataFrame) -> pd.DataFrame:
@@ -84,6 +104,7 @@ def _load_synthetic(spec: SequenceSpec, body) -> SequenceInputs:
         gt_poses3d=scene.poses3d,
         gt_associations=scene.associations,
         gt_people=scene.people,
+        gt_motions=scene.motions,
     )
 
 

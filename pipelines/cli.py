@@ -286,24 +286,13 @@ def cmd_export(args) -> int:
     return 0
 
 
-DEFAULT_FPS = 30.0
-"""Frame rate of a sequence whose dataset does not state one (Shelf, captures registered without --fps)."""
-
-
 def _sequence_fps(partition: str) -> tuple[float, str]:
-    """The frame rate of a partition's sequence and where it comes from (its datasets entry, or the default)."""
+    """The frame rate of a partition's sequence and where it comes from (``humancal.inputs.sequence_fps``)."""
+    from humancal.inputs import sequence_fps
     from pipelines.definitions import defs
 
-    spec = defs.resources["datasets"].spec(partition)
-    if spec.options.get("fps") is not None:
-        return float(spec.options["fps"]), f"the {spec.kind} options of {partition}"
-    if spec.kind == "synthetic":
-        from humancal.synthetic import preset
-
-        options = dict(spec.options)
-        name = options.pop("preset", "demo")
-        return float(preset(name, **options).fps), f"synthetic preset {name!r}"
-    return DEFAULT_FPS, f"default: {partition} states no frame rate; pass --fps to set it"
+    fps, source = sequence_fps(defs.resources["datasets"].spec(partition))
+    return fps, source if "default" not in source else f"{source}; pass --fps to set it"
 
 
 def _frame_slice(text: str | None) -> slice | None:

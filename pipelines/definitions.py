@@ -6,6 +6,7 @@ import dagster as dg
 
 from assets.association import association
 from assets.baselines import gt_camera_triangulation
+from assets.bodies import fitted_motions
 from assets.calibration import detections, extrinsics, intrinsics
 from assets.lifter import build_lifter_assets
 from assets.metric_tables import metric_tables
@@ -24,7 +25,7 @@ from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFa
 from resources.torch import TorchResource
 
 PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, association,
-                       metric_tables]
+                       fitted_motions, metric_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
 SHARED_ASSETS = [sequence_registry, mocap_clips]

@@ -27,7 +27,10 @@ class BodyFitConfig:
         noise_3d_m: expected noise of the triangulated joints (the 3D initialisation stage), metres.
         robust_scale_3d_m: Geman-McClure scale of the 3D stage, metres.
         weight_latent: weight of ``mean(z^2)`` (the prior's N(0, I)).
-        weight_local_linear: weight of the mean squared latent second difference (the paper's local-linear term).
+        weight_local_linear: weight of the mean squared latent second difference (the paper's local-linear term)
+            in the stages on the 2D detections.
+        weight_local_linear_3d: the same in the first stage, on the triangulated joints (a stiff temporal term slows
+            that stage's Adam steps; the L-BFGS stages after it cope with a stiffer one).
         weight_rest: weight of the mean squared 6D offset from the reference pose (the no-prior fit only).
         weight_shape: weight of the mean squared phenotype change from the initial (average adult) body.
         weight_root_smooth: weight of the root's mean squared second difference (translation in units of
@@ -45,12 +48,13 @@ class BodyFitConfig:
         fit_shape: whether the phenotypes are fitted (else the average adult body).
     """
 
-    noise_px: float = 5.0
+    noise_px: float = 15.0
     robust_scale_px: float = 40.0
     noise_3d_m: float = 0.03
     robust_scale_3d_m: float = 0.15
     weight_latent: float = 1e-3
     weight_local_linear: float = 100.0
+    weight_local_linear_3d: float = 100.0
     weight_rest: float = 1e-4
     weight_shape: float = 1e-2
     weight_root_smooth: float = 0.1

@@ -200,8 +200,9 @@ class _Problem:
 
     def total(self, terms: dict[str, Tensor]) -> Tensor:
         c = self.config
+        local_linear = c.weight_local_linear_3d if "data_3d" in terms else c.weight_local_linear
         weights = {"data_3d": 1.0, "reprojection": 1.0, "root_smooth": c.weight_root_smooth, "shape": c.weight_shape,
-                   "latent": c.weight_latent, "local_linear": c.weight_local_linear, "seam": c.weight_seam,
+                   "latent": c.weight_latent, "local_linear": local_linear, "seam": c.weight_seam,
                    "rest": c.weight_rest}
         return sum(weights[name] * value for name, value in terms.items())
 

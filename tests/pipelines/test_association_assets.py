@@ -18,8 +18,10 @@ from resources.io_managers import partition_path
 from tests.pipelines.test_calibration_assets import SCENE, _stand_in_table
 
 PARTITION = "synthetic__calib"
-ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people",
-          "gt_camera_triangulation", "associations", "skeletons3d", "metric_tables"]
+ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people", "gt_motions",
+          "gt_camera_triangulation", "associations", "skeletons3d", "fitted_motions", "metric_tables"]
+FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10}
+"""A shorter body fit than the default (the test checks the wiring and sane figures, not the best ones)."""
 
 
 def _write(storage, asset, table, name):
@@ -43,7 +45,8 @@ def materialized(tmp_path_factory, body_model):
         instance.add_dynamic_partitions(SEQUENCES.name, [PARTITION])
         result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
                                 selection=dg.AssetSelection.assets(*ASSETS), partition_key=PARTITION,
-                                instance=instance)
+                                instance=instance, run_config={"ops": {
+                                    "fitted_motions": {"config": FIT}, "metric_tables": {"config": FIT}}})
     return result, storage, scene, defs
 
 
@@ -93,6 +96,35 @@ def test_association_metric_rows(materialized):
         assert 0 < rows["seconds"] < 60
     # the ground-truth camera rows are not figures of the estimated cameras: no failed-checks mark
     assert metrics.loc[metrics["method"] == "association_gt_cameras", "failed_checks"].isna().all()
+
+
+def test_fitted_motions_and_body_metric_rows(materialized):
+    result, storage, scene, defs = materialized
+    graph = defs.resolve_asset_graph()
+    parents = {k.to_user_string() for k in graph.get(dg.AssetKey("fitted_motions")).parent_keys}
+    assert parents == {"detections", "associations", "skeletons3d", "extrinsics"}  # never ground truth
+    motions = _read(storage, "fitted_motions")
+    assert list(motions.columns) == SCHEMAS["motions"].names
+    assert motions["person_id"].nunique() == SCENE["num_people"]
+    assert motions.groupby("person_id")["frame"].nunique().min() > 0.9 * SCENE["num_frames"]
+    meta = {e.materialization.asset_key.to_user_string(): e.materialization.metadata
+            for e in result.get_asset_materialization_events()}["fitted_motions"]
+    assert 0 < meta["seconds_total"].value < 120 and "seconds_fit3d" in meta and "loss_reprojection" in meta
+    assert meta["reprojection"].value.startswith("![fitted meshes reprojected") and "base64," in meta["scene"].value
+    assert meta["reprojection_error_px"].value < 15
+    metrics = _read(storage, "metric_tables")
+    expected = {"mpjpe_mm", "pa_mpjpe_mm", "pcp_avg", "accel_error_mm_s2", "pve_mm", "reprojection_error_px",
+                "seconds"}
+    for method in ("fit_init_cameras", "fit_gt_cameras", "fit_per_frame_prior", "fit_no_prior"):
+        rows = metrics[metrics["method"] == method].set_index("metric")["value"]
+        assert expected <= set(rows.index), (method, sorted(rows.index))
+        assert rows["mpjpe_mm"] < 60 and rows["pve_mm"] < 80 and rows["pcp_avg"] > 80, (method, rows.to_dict())
+    for method in ("skeletons3d", "skeletons3d_gt_cameras"):
+        rows = metrics[metrics["method"] == method].set_index("metric")["value"]
+        assert {"mpjpe_mm", "pa_mpjpe_mm", "accel_error_mm_s2"} <= set(rows.index)
+    # the dynamics prior is smoother than raw joint angles fitted with no prior
+    accel = metrics[metrics["metric"] == "accel_error_mm_s2"].set_index("method")["value"]
+    assert accel["fit_init_cameras"] < accel["fit_no_prior"]
 
 
 def test_identity_metrics_count_pairs_switches_and_rejections():

@@ -1,0 +1,86 @@
+"""Per sequence: every person's body shape and motion, fitted to the associated detections through the motion
+prior with the estimated cameras held fixed (the paper's III-E; ``docs/bodies.md``)."""
+
+import functools
+import tempfile
+from pathlib import Path
+
+import dagster as dg
+import pandas as pd
+
+from assets.common import png_metadata, sequence_asset, table_output
+from assets.settings import BodyFitSettings
+from humancal.camera import CameraRig
+from humancal.fitting import body_observations, fit_bodies
+from humancal.fitting.plot import plot_fit_reprojection, plot_fit_scene
+from humancal.inputs import sequence_fps
+from humancal.lifter import lifted_from_table
+from humancal.prior import read_prior_info, shipped_prior
+from humancal.prior.weights import SHIPPED_VARIANT_STEMS
+from resources.body_model import BodyModelResource
+from resources.datasets import DatasetsResource
+from resources.torch import TorchResource
+
+
+@functools.lru_cache(maxsize=2)
+def fitting_prior(variant: str = "motion_prior"):
+    """The shipped prior of ``variant`` (loaded once per process)."""
+    return shipped_prior(variant)[0]
+
+
+def _weights_digest(variant: str) -> str:
+    return str(read_prior_info(SHIPPED_VARIANT_STEMS[variant])["digest"])[:12]
+
+
+CODE_VERSION = f"1-prior-{_weights_digest('motion_prior')}"
+"""The code version names the shipped prior's weights digest: new weights make every fit stale."""
+
+
+@sequence_asset("motions", code_version=CODE_VERSION, description=(
+    "Every person's anny body (phenotypes) and motion (bone rotations, root translation, keypoints) per frame, "
+    "fitted to the associated detections through the motion prior, the estimated cameras held fixed."))
+def fitted_motions(context: dg.AssetExecutionContext, config: BodyFitSettings, body_model: BodyModelResource,
+                   torch_runtime: TorchResource, datasets: DatasetsResource, detections: pd.DataFrame,
+                   associations: pd.DataFrame, skeletons3d: pd.DataFrame, extrinsics: pd.DataFrame) -> dg.Output:
+    """Fit shape and motion of every tracked person (``humancal.fitting.fit_bodies``): from the detections, the
+    association and the self-calibrated cameras only (never ground truth)."""
+    sequence = context.partition_key
+    fps, fps_source = sequence_fps(datasets.spec(sequence))
+    dense, _ = lifted_from_table(detections)
+    rig = CameraRig.from_table(extrinsics)
+    body = body_model.get()
+    observations, warnings = body_observations(dense, associations, skeletons3d, len(rig))
+    for warning in warnings:
+        context.log.warning(warning)
+    context.log.info(f"{sequence}: fitting {observations.num_people} people over {observations.num_frames} frames "
+                     f"in {observations.num_views} views at {fps:g} fps ({fps_source})")
+    with torch_runtime.applied():
+        result = fit_bodies(body, observations, rig, fitting_prior(), config.to_library(), fps=fps,
+                            warnings=tuple(warnings))
+    table = result.motions.to_table(sequence)
+    with tempfile.TemporaryDirectory() as tmp:
+        pictures = {
+            "reprojection": png_metadata(plot_fit_reprojection(body, result.motions, observations, rig,
+                                                               Path(tmp) / "reprojection.png"),
+                                         "fitted meshes reprojected over the detections"),
+            "scene": png_metadata(plot_fit_scene(body, result.motions, rig, Path(tmp) / "scene.png"),
+                                  "the fitted people and the cameras in 3D"),
+        }
+    context.log.info(f"{sequence}: {result.motions.num_people} bodies fitted in {result.stage_seconds['total']:.1f} s, "
+                     f"reprojection {result.reprojection_error_px:.2f} px")
+    return table_output(
+        table, "motions", rows=len(table), num_people=result.motions.num_people, fps=fps,
+        reprojection_error_px=round(result.reprojection_error_px, 3),
+        **{f"seconds_{stage}": round(s, 3) for stage, s in result.stage_seconds.items()},
+        **{f"loss_{term}": float(v) for term, v in result.loss_terms.items()},
+        prior_weights=_weights_digest("motion_prior"), warnings="; ".join(warnings) or "none", **pictures)
+
+
+def latest_fit_seconds(instance: dg.DagsterInstance, partition: str) -> float:
+    """The fit time of the latest ``fitted_motions`` materialization of a partition, seconds (NaN if unrecorded)."""
+    records = instance.fetch_materializations(
+        dg.AssetRecordsFilter(asset_key=dg.AssetKey("fitted_motions"), asset_partitions=[partition]), limit=1).records
+    if not records:
+        return float("nan")
+    value = records[0].asset_materialization.metadata.get("seconds_total")
+    return float(value.value) if value is not None else float("nan")

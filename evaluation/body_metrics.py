@@ -1,0 +1,237 @@
+"""Figures of the fitted bodies against the ground truth, beside the triangulated skeletons they start from.
+
+Methods (metric-table names):
+
+* ``fit_init_cameras``: the pipeline's ``fitted_motions`` (estimated cameras held fixed, the default prior);
+* ``fit_gt_cameras``: the same fit with the true cameras (and the association run with them): what the fit gives
+  when the calibration is perfect;
+* ``fit_per_frame_prior``: the estimated cameras, the per-frame pose prior (no dynamics);
+* ``fit_no_prior``: the estimated cameras, raw joint angles (no prior);
+* ``skeletons3d`` and ``skeletons3d_gt_cameras``: the association's triangulated skeletons, the fits' baseline.
+
+Every fitted person is matched to a true person per frame through the detections it was fitted to (as the
+skeletons: ``evaluation.association_metrics.skeletons_in_truth``) and moved into the ground-truth world by the
+similarity that aligns the cameras. Figures: the dataset's protocol (Shelf: ``pcp_actor1``..``pcp_actor3``,
+``pcp_avg``, ``mpjpe_mm``, the head joints derived from the fitted body's nose, ears and shoulders by the same rule
+as every other Shelf row; synthetic: ``mpjpe_mm``, ``pa_mpjpe_mm``, ``pcp_avg``), ``accel_error_mm_s2`` (where the
+ground truth has every frame: synthetic), ``pve_mm`` (synthetic: the people are anny bodies, so vertices compare
+one to one), ``reprojection_error_px`` (fitted keypoints against the detections they were fitted to, in the
+estimated world) and ``seconds``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import torch
+
+from evaluation.association_metrics import protocol_of, skeletons_in_truth
+from evaluation.protocols import MetricRow, evaluate_reprojection, metrics_table
+from humancal.association import associate, to_associations_table, to_skeletons_table
+from humancal.body import BodyModel
+from humancal.calibration.alignment import align_rig
+from humancal.camera import Camera, CameraRig
+from humancal.fitting import BodyFitConfig, FittedMotions, body_observations, fit_bodies
+from humancal.keypoints import CANONICAL_JOINTS
+from humancal.lifter import lifted_from_table
+from humancal.poses import poses_to_dense
+from humancal.prior import MotionVAE
+from humancal.sequences import SequenceSpec
+
+__all__ = ["BodyFitInputs", "body_metric_rows", "body_metric_table", "keypoints_table", "skeleton_accel_rows"]
+
+PVE_MAX_FRAMES = 60
+"""Frames per person whose vertices the PVE compares (evenly spread; a full mesh per frame is costly)."""
+
+
+def keypoints_table(motions: pd.DataFrame) -> pd.DataFrame:
+    """The fitted keypoints of a ``motions`` table as a ``skeletons3d``-like table (frame, person_id, joint, x_m,
+    y_m, z_m, valid), for the protocols."""
+    n = len(motions)
+    xyz = np.stack(motions["keypoints_world_m"].to_numpy()).reshape(n * len(CANONICAL_JOINTS), 3) if n else \
+        np.zeros((0, 3))
+    return pd.DataFrame({
+        "sequence": np.repeat(motions["sequence"].to_numpy(), len(CANONICAL_JOINTS)),
+        "frame": np.repeat(motions["frame"].to_numpy(np.int32), len(CANONICAL_JOINTS)),
+        "person_id": np.repeat(motions["person_id"].to_numpy(np.int32), len(CANONICAL_JOINTS)),
+        "joint": np.tile(np.asarray(CANONICAL_JOINTS, dtype=object), n),
+        "x_m": xyz[:, 0], "y_m": xyz[:, 1], "z_m": xyz[:, 2],
+        "valid": np.isfinite(xyz).all(1),
+    })
+
+
+def _accel_error_mm_s2(poses: pd.DataFrame, gt_poses3d: pd.DataFrame, fps: float) -> float:
+    """Mean acceleration error over every run of >= 3 consecutive frames where both sides have the joint."""
+    g = poses_to_dense(gt_poses3d, CANONICAL_JOINTS)
+    p = poses_to_dense(poses, CANONICAL_JOINTS)
+    index = {(f, i): n for n, (f, i) in enumerate(zip(p.frame, p.person_id))}
+    errors = []
+    for person in np.unique(g.person_id):
+        rows = np.flatnonzero(g.person_id == person)
+        rows = rows[np.argsort(g.frame[rows])]
+        frames = g.frame[rows]
+        pred = np.full((len(rows), len(CANONICAL_JOINTS), 3), np.nan)
+        has = np.array([index.get((f, person), -1) for f in frames])
+        pred[has >= 0] = p.joints_world_m[has[has >= 0]]
+        gt = g.joints_world_m[rows]
+        consecutive = (frames[2:] - frames[:-2]) == 2
+        acc = lambda x: x[2:] - 2.0 * x[1:-1] + x[:-2]  # noqa: E731
+        diff = np.linalg.norm(acc(pred) - acc(gt), axis=-1)[consecutive]
+        errors.append(diff[np.isfinite(diff)])
+    values = np.concatenate(errors) if errors else np.zeros(0)
+    return float(1000.0 * values.mean() * fps**2) if values.size else float("nan")
+
+
+def _pve_mm(motions: FittedMotions, gt_motions: FittedMotions, true_of: dict[int, int], to_truth, body: BodyModel) -> float:
+    """Mean vertex error of each fitted person against the true person they are matched to (whole-sequence
+    majority), over up to ``PVE_MAX_FRAMES`` frames each, in the ground-truth world."""
+    errors = []
+    for p, pid in enumerate(motions.person_ids.tolist()):
+        if pid not in true_of or true_of[pid] not in gt_motions.person_ids.tolist():
+            continue
+        q = int(np.flatnonzero(gt_motions.person_ids == true_of[pid])[0])
+        frames = np.intersect1d(motions.frames[motions.present[p]], gt_motions.frames[gt_motions.present[q]])
+        if frames.size == 0:
+            continue
+        frames = frames[np.linspace(0, frames.size - 1, min(PVE_MAX_FRAMES, frames.size)).round().astype(int)]
+        a = np.searchsorted(motions.frames, frames)
+        b = np.searchsorted(gt_motions.frames, frames)
+        as_t = lambda x: torch.as_tensor(x, dtype=body.dtype)  # noqa: E731
+        with torch.no_grad():
+            fit = body.reference_forward(as_t(motions.phenotypes[p:p + 1]), as_t(motions.bone_rotmats_local[p:p + 1, a]),
+                                         as_t(motions.root_translation_m[p:p + 1, a]))["vertices"][0].double().numpy()
+            gt = body.reference_forward(as_t(gt_motions.phenotypes[q:q + 1]), as_t(gt_motions.bone_rotmats_local[q:q + 1, b]),
+                                        as_t(gt_motions.root_translation_m[q:q + 1, b]))["vertices"][0].double().numpy()
+        errors.append(np.linalg.norm(to_truth(fit) - gt, axis=-1).mean(axis=-1))
+    return float(1000.0 * np.concatenate(errors).mean()) if errors else float("nan")
+
+
+def _whole_sequence_owner(associations: pd.DataFrame, gt_associations: pd.DataFrame) -> dict[int, int]:
+    """Estimated person id -> the true id holding most of its detections over the whole sequence."""
+    from humancal.associations import Associations
+
+    est = associations[associations["person_id"] >= 0]
+    true = Associations.from_table(gt_associations).person_of(est["frame"], est["view"], est["det_id"])
+    pairs = pd.DataFrame({"est": est["person_id"].to_numpy(), "true": true})
+    pairs = pairs[pairs["true"] >= 0]
+    if pairs.empty:
+        return {}
+    counts = pairs.groupby(["est", "true"]).size().rename("n").reset_index().sort_values("n", ascending=False)
+    return {int(r.est): int(r.true) for r in counts.drop_duplicates("est").itertuples()}
+
+
+def body_metric_rows(spec: SequenceSpec, *, motions: pd.DataFrame, fps: float, seconds: float,
+                     associations: pd.DataFrame, detections: pd.DataFrame, cameras: list[Camera],
+                     gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame, gt_cameras: list[Camera],
+                     gt_motions: pd.DataFrame | None = None, body: BodyModel | None = None) -> list[MetricRow]:
+    """The figures of one body fit (module docstring).
+
+    Args:
+        motions: the fit's ``motions`` table.
+        fps: the sequence's frame rate.
+        seconds: the fit's wall time.
+        associations: the associations the fit was made from.
+        detections: the ``detections`` (2D) the fit was made from (for the reprojection error).
+        cameras: the cameras the fit was made with; ``gt_cameras`` the true ones.
+        gt_motions: the true ``motions`` (synthetic scenes) for ``pve_mm``; None or empty: no PVE.
+        body: the body model (needed with ``gt_motions``).
+    """
+    protocol = protocol_of(spec)
+    fitted = keypoints_table(motions)
+    in_truth = skeletons_in_truth(associations, fitted, gt_associations, cameras, gt_cameras)
+    rows = protocol(in_truth, gt_poses3d)
+    if spec.kind == "synthetic":
+        rows.append(MetricRow("accel_error_mm_s2", _accel_error_mm_s2(in_truth, gt_poses3d, fps), "mm/s^2"))
+        if gt_motions is not None and len(gt_motions) and body is not None and len(motions):
+            similarity = align_rig(cameras, gt_cameras)
+            pve = _pve_mm(FittedMotions.from_table(motions, fps), FittedMotions.from_table(gt_motions, fps),
+                          _whole_sequence_owner(associations, gt_associations), similarity.apply, body)
+            rows.append(MetricRow("pve_mm", pve, "mm"))
+    reprojection = evaluate_reprojection(fitted, detections, associations, cameras)
+    rows += [r for r in reprojection if r.metric in ("reprojection_error_px", "reprojection_error_median_px")]
+    rows.append(MetricRow("seconds", float(seconds), "s"))
+    return rows
+
+
+def skeleton_accel_rows(spec: SequenceSpec, *, skeletons3d: pd.DataFrame, associations: pd.DataFrame, fps: float,
+                        cameras: list[Camera], gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
+                        gt_cameras: list[Camera]) -> list[MetricRow]:
+    """The baseline's figures under the same protocol as the fits (``skeletons3d`` rows)."""
+    in_truth = skeletons_in_truth(associations, skeletons3d, gt_associations, cameras, gt_cameras)
+    rows = protocol_of(spec)(in_truth, gt_poses3d)
+    if spec.kind == "synthetic":
+        rows.append(MetricRow("accel_error_mm_s2", _accel_error_mm_s2(in_truth, gt_poses3d, fps), "mm/s^2"))
+    return rows
+
+
+@dataclass(frozen=True)
+class BodyFitInputs:
+    """What the body rows need besides the tables (the models, and the pipeline fit's settings)."""
+
+    body: BodyModel
+    prior: MotionVAE
+    per_frame_prior: MotionVAE | None
+    config: BodyFitConfig
+    fps: float
+
+
+def body_metric_table(spec: SequenceSpec, models: BodyFitInputs, *, fitted_motions: pd.DataFrame, fit_seconds: float,
+                      associations: pd.DataFrame, skeletons3d: pd.DataFrame, lifted_detections: pd.DataFrame,
+                      detections: pd.DataFrame, cameras: list[Camera], gt_associations: pd.DataFrame,
+                      gt_poses3d: pd.DataFrame, gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
+                      failed_checks: str | None = None, log=None) -> pd.DataFrame:
+    """Rows of every body method of the module docstring (the pipeline's fit read, the others fitted here; they
+    never feed the pipeline).
+
+    Args:
+        fitted_motions, fit_seconds: the pipeline's ``fitted_motions`` and its fit time.
+        associations, skeletons3d: the pipeline's association (estimated cameras).
+        lifted_detections: the ``detections`` asset (2D + lifted poses), for the association with the true cameras.
+        detections: the 2D detections.
+        failed_checks: the checks the estimated cameras failed (as the camera rows).
+        log: called with a line per method fitted here.
+    """
+    say = log or (lambda message: None)
+    dense, lifted = lifted_from_table(lifted_detections)
+    common = dict(detections=detections, gt_associations=gt_associations, gt_poses3d=gt_poses3d,
+                  gt_cameras=gt_cameras, gt_motions=gt_motions, body=models.body, fps=models.fps)
+
+    def fit(people: pd.DataFrame, skeletons: pd.DataFrame, used: list[Camera], prior: MotionVAE | None):
+        start = time.perf_counter()
+        observations, _ = body_observations(dense, people, skeletons, len(used))
+        result = fit_bodies(models.body, observations, CameraRig.from_cameras(used), prior, models.config,
+                            fps=models.fps)
+        return result.motions.to_table(spec.sequence), time.perf_counter() - start
+
+    parts = []
+    rows = body_metric_rows(spec, motions=fitted_motions, seconds=fit_seconds, associations=associations,
+                            cameras=cameras, **common)
+    parts.append(metrics_table(spec.dataset, spec.sequence, "fit_init_cameras", rows, failed_checks))
+    # the same association and fit with the true cameras (evaluation only)
+    true_rig = CameraRig.from_cameras(gt_cameras)
+    result = associate(dense, lifted, true_rig)
+    gt_people, gt_skeletons = to_associations_table(result, spec.sequence), to_skeletons_table(result, spec.sequence)
+    motions, seconds = fit(gt_people, gt_skeletons, gt_cameras, models.prior)
+    say(f"fit_gt_cameras: {seconds:.1f} s")
+    rows = body_metric_rows(spec, motions=motions, seconds=seconds, associations=gt_people, cameras=gt_cameras, **common)
+    parts.append(metrics_table(spec.dataset, spec.sequence, "fit_gt_cameras", rows, None))
+    ablations = {"fit_no_prior": None}
+    if models.per_frame_prior is not None:
+        ablations = {"fit_per_frame_prior": models.per_frame_prior, **ablations}
+    for method, prior in ablations.items():
+        motions, seconds = fit(associations, skeletons3d, cameras, prior)
+        say(f"{method}: {seconds:.1f} s")
+        rows = body_metric_rows(spec, motions=motions, seconds=seconds, associations=associations, cameras=cameras,
+                                **common)
+        parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed_checks))
+    for method, (people, skeletons, used, failed) in {
+        "skeletons3d": (associations, skeletons3d, cameras, failed_checks),
+        "skeletons3d_gt_cameras": (gt_people, gt_skeletons, gt_cameras, None),
+    }.items():
+        rows = skeleton_accel_rows(spec, skeletons3d=skeletons, associations=people, fps=models.fps, cameras=used,
+                                   gt_associations=gt_associations, gt_poses3d=gt_poses3d, gt_cameras=gt_cameras)
+        parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed))
+    return pd.concat(parts, ignore_index=True)
