@@ -1,0 +1,65 @@
+import numpy as np
+import pandas as pd
+import pytest
+
+from humancal.detections import DenseDetections
+from humancal.fitting import FittingInputError, body_observations
+from humancal.keypoints import CANONICAL_JOINTS
+from humancal.tables import SCHEMAS
+
+
+def _detections(rows):
+    """rows: (frame, view, det_id) with 23 keypoints at (10 * view, frame) and score 0.9."""
+    frame, view, det = (np.array(c, dtype=np.int64) for c in zip(*rows))
+    keypoints = np.stack([np.full((23, 2), [10.0 * v, float(f)]) for f, v, _ in rows])
+    return DenseDetections(frame, view, det, keypoints, np.full((len(rows), 23), 0.9))
+
+
+def _associations(rows, people):
+    frame, view, det = zip(*rows)
+    return pd.DataFrame({"sequence": "s", "frame": frame, "view": view, "det_id": det, "person_id": people})
+
+
+def _skeletons(person_frames):
+    records = [{"sequence": "s", "frame": f, "person_id": p, "joint": j, "x_m": 0.0, "y_m": 0.0, "z_m": 1.0,
+                "num_views": 2, "valid": True} for p, frames in person_frames.items() for f in frames
+               for j in CANONICAL_JOINTS]
+    return pd.DataFrame(records, columns=SCHEMAS["skeletons3d"].names)
+
+
+def test_dense_observations_and_people_left_out_with_a_reason():
+    rows, people = [], []
+    for f in range(6):
+        rows += [(f, 0, 0), (f, 1, 0)]
+        people += [0, 0]  # person 0: two views, six frames
+        rows += [(f, 0, 1)]
+        people += [1]  # person 1: one view only
+    rows += [(2, 1, 1), (3, 1, 1), (2, 0, 2), (3, 0, 2)]
+    people += [2, 2, 2, 2]  # person 2: two views, two frames
+    obs, warnings = body_observations(_detections(rows), _associations(rows, people),
+                                      _skeletons({0: range(6), 2: [2, 3]}), num_views=2)
+    assert obs.person_ids.tolist() == [0] and obs.num_frames == 6 and obs.keypoints_px.shape == (2, 1, 6, 23, 2)
+    assert obs.present.all() and obs.joints_valid.all()
+    np.testing.assert_allclose(obs.keypoints_px[1, 0, 4, 0], [10.0, 4.0])
+    assert any("person 1 left out" in w and "1 view(s)" in w for w in warnings)
+    assert any("person 2 left out" in w and "2 frame(s)" in w for w in warnings)
+
+
+def test_bad_inputs_raise_clear_errors():
+    rows = [(f, v, 0) for f in range(5) for v in range(2)]
+    people = [0] * len(rows)
+    detections = _detections(rows)
+    with pytest.raises(FittingInputError, match="no detection belongs to a person"):
+        body_observations(detections, _associations(rows, [-1] * len(rows)), _skeletons({}), num_views=2)
+    with pytest.raises(FittingInputError, match="no person can be fitted: person 0 left out"):
+        body_observations(detections, _associations(rows, people), _skeletons({0: range(5)}), num_views=2,
+                          min_frames=10)
+    broken = DenseDetections(detections.frame, detections.view, detections.det_id, detections.keypoints_px.copy(),
+                             detections.scores)
+    broken.keypoints_px[3, 5] = np.nan
+    with pytest.raises(FittingInputError, match=r"frame 1, view 1, det_id 0 has a non-finite keypoint with score > 0"):
+        body_observations(broken, _associations(rows, people), _skeletons({0: range(5)}), num_views=2)
+    with pytest.raises(FittingInputError, match=r"persons \[0\] have no valid triangulated joint"):
+        body_observations(detections, _associations(rows, people), _skeletons({}), num_views=2)
+    with pytest.raises(FittingInputError, match=r"view numbers must be 0..0"):
+        body_observations(detections, _associations(rows, people), _skeletons({0: range(5)}), num_views=1)
