@@ -66,19 +66,27 @@ def plot_fit_reprojection(body: BodyModel, motions: FittedMotions, observations:
             ax.axis("off")
             continue
         camera = rig.to_cameras()[v]
+        drawn = []
         for k, p in enumerate(people):
             colour = colours(int(motions.person_ids[p]) % colours.N)
             seen = observations.confidence[v, p, index] > 0
             if seen.any():
                 detected = np.where(seen[:, None], observations.keypoints_px[v, p, index], np.nan)
                 _draw_limbs(ax, detected, "0.55", linewidth=2.5, alpha=0.6)
-            pixels, in_front = rig.project(vertices[k][::_VERTEX_STRIDE])
-            ok = in_front[v]
-            ax.scatter(pixels[v, ok, 0], pixels[v, ok, 1], s=0.4, color=colour, alpha=0.35, linewidths=0)
-            kp, kp_front = rig.project(motions.keypoints_world_m[p, index])
-            _draw_limbs(ax, np.where(kp_front[v][:, None], kp[v], np.nan), colour, linewidth=1.2)
-        ax.set_xlim(0, camera.width_px)
-        ax.set_ylim(camera.height_px, 0)
+            pixels, _ = rig.project(vertices[k][::_VERTEX_STRIDE])  # NaN behind the camera
+            ax.scatter(pixels[v, :, 0], pixels[v, :, 1], s=0.4, color=colour, alpha=0.35, linewidths=0)
+            drawn.append(pixels[v])
+            keypoints, _ = rig.project(motions.keypoints_world_m[p, index])
+            _draw_limbs(ax, keypoints[v], colour, linewidth=1.2)
+        # the people's region of the image (with a margin), so that the fit can be judged; the whole image if empty
+        points = np.concatenate(drawn) if drawn else np.zeros((0, 2))
+        points = points[np.isfinite(points).all(1)]
+        low, high = np.array([0.0, 0.0]), np.array([camera.width_px, camera.height_px], dtype=float)
+        if len(points):
+            margin = 0.15 * (points.max(0) - points.min(0)).max() + 20.0
+            low, high = np.maximum(points.min(0) - margin, low), np.minimum(points.max(0) + margin, high)
+        ax.set_xlim(low[0], high[0])
+        ax.set_ylim(high[1], low[1])
         ax.set_aspect("equal")
         ax.set_title(f"view {v}", fontsize=9)
         ax.tick_params(labelsize=6)

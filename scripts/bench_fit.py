@@ -1,0 +1,93 @@
+"""Run time, memory and accuracy of the body fit on the benchmark workload: 900 frames, 5 views, 4 people.
+
+Builds the synthetic ``benchmark`` scene, lifts its detections with the shipped lifter and associates them with the
+true cameras (none of that is timed), then fits every person's shape and motion with the shipped motion prior
+(:func:`humancal.fitting.fit_bodies`, default settings) and prints the seconds of each stage, the peak memory of the
+process, and the fit's MPJPE and acceleration error against the ground truth beside the triangulated skeletons'.
+
+    python scripts/bench_fit.py [--preset benchmark] [--threads 2] [--prior motion_prior|per_frame|none]
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+
+import numpy as np
+import threadpoolctl
+import torch
+
+from humancal.association import associate, to_associations_table, to_skeletons_table
+from humancal.associations import Associations
+from humancal.body import BodyModel
+from humancal.camera import CameraRig
+from humancal.detections import detections_to_dense
+from humancal.fitting import BodyFitConfig, body_observations, fit_bodies
+from humancal.keypoints import JOINT_INDEX
+from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
+from humancal.prior import shipped_prior
+from humancal.synthetic import generate_scene, preset
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _errors(scene, motions, skeletons, truth_of):
+    """(fit MPJPE mm, skeleton MPJPE mm, fit accel mm/s^2, skeleton accel mm/s^2) over present frames."""
+    fps = scene.config.fps
+    acc = lambda x: x[2:] - 2 * x[1:-1] + x[:-2]  # noqa: E731
+    out = np.zeros(4)
+    for p, pid in enumerate(motions.person_ids):
+        gt = scene.keypoints_world_m[truth_of[int(pid)]][motions.frames]
+        rows = skeletons[skeletons["person_id"] == pid]
+        tri = np.full(gt.shape, np.nan)
+        tri[rows["frame"].to_numpy() - motions.frames[0], rows["joint"].map(JOINT_INDEX).to_numpy()] = \
+            rows[["x_m", "y_m", "z_m"]].to_numpy()
+        keep = motions.present[p]
+        fit = motions.keypoints_world_m[p]
+        out += [np.linalg.norm(fit - gt, axis=-1)[keep].mean(), np.nanmean(np.linalg.norm(tri - gt, axis=-1)[keep]),
+                np.linalg.norm(acc(fit) - acc(gt), axis=-1).mean() * fps**2,
+                np.nanmean(np.linalg.norm(acc(tri) - acc(gt), axis=-1)) * fps**2]
+    return 1000.0 * out / motions.num_people
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--preset", default="benchmark")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--prior", default="motion_prior", choices=["motion_prior", "per_frame", "none"])
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    with threadpoolctl.threadpool_limits(args.threads):
+        body = BodyModel()
+        scene = generate_scene(preset(args.preset), body, sequence=args.preset)
+        dense = detections_to_dense(scene.detections)
+        rig = CameraRig.from_cameras(scene.rig)
+        lifted = lift_detections(load_lifter(shipped_checkpoint()), dense.keypoints_px, dense.scores,
+                                 K=rig.K[dense.view])
+        result = associate(dense, lifted, rig)
+        people = to_associations_table(result, args.preset)
+        skeletons = to_skeletons_table(result, args.preset)
+        observations, warnings = body_observations(dense, people, skeletons, len(rig))
+        prior = None if args.prior == "none" else shipped_prior(args.prior)[0]
+        print(f"workload: {observations.num_frames} frames, {len(rig)} views, {observations.num_people} people "
+              f"({observations.present.sum()} person-frames), prior {args.prior}, {args.threads} thread(s); "
+              f"peak memory before the fit {_peak_rss_mb():.0f} MB")
+        start = time.perf_counter()
+        fit = fit_bodies(body, observations, rig, prior, BodyFitConfig(), fps=scene.config.fps)
+        wall = time.perf_counter() - start
+    stages = ", ".join(f"{k} {v:.2f}" for k, v in fit.stage_seconds.items())
+    print(f"fit seconds: {stages} (wall {wall:.2f}); peak memory {_peak_rss_mb():.0f} MB")
+    truth = Associations.from_table(scene.associations).person_of_detections(dense)
+    found = Associations.from_table(people).person_of_detections(dense)
+    truth_of = {int(pid): int(np.bincount(truth[(found == pid) & (truth >= 0)]).argmax())
+                for pid in fit.motions.person_ids}
+    mpjpe, skel_mpjpe, accel, skel_accel = _errors(scene, fit.motions, skeletons, truth_of)
+    print(f"MPJPE fit {mpjpe:.1f} mm (skeletons3d {skel_mpjpe:.1f}); acceleration error fit {accel:.0f} mm/s^2 "
+          f"(skeletons3d {skel_accel:.0f}); reprojection {fit.reprojection_error_px:.2f} px")
+
+
+if __name__ == "__main__":
+    main()
