@@ -60,8 +60,8 @@ class BodyFitConfig:
     weight_root_smooth: float = 0.1
     root_smooth_scale_m: float = 0.01
     weight_seam: float = 100.0
-    window_frames: int = 64
-    window_overlap: int = 8
+    window_frames: int = 32
+    window_overlap: int = 6
     iterations_3d: int = 300
     iterations_global: int = 10
     iterations_body: int = 30
