@@ -20,8 +20,8 @@ from tests.pipelines.test_calibration_assets import SCENE, _stand_in_table
 PARTITION = "synthetic__calib"
 ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people", "gt_motions",
           "gt_camera_triangulation", "associations", "skeletons3d", "fitted_motions", "metric_tables"]
-FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10}
-"""A shorter body fit than the default (the test checks the wiring and sane figures, not the best ones)."""
+FIT = {"iterations_body": 15}
+"""A shorter last stage than the default (the test checks the wiring and sane figures, not the best ones)."""
 
 
 def _write(storage, asset, table, name):
