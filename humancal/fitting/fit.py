@@ -201,6 +201,8 @@ class _Problem:
     def total(self, terms: dict[str, Tensor]) -> Tensor:
         c = self.config
         local_linear = c.weight_local_linear_3d if "data_3d" in terms else c.weight_local_linear
+        if self.prior is not None and not self.prior.config.temporal:
+            local_linear = 0.0  # a per-frame prior is the baseline without dynamics: no smoothness of its latents
         weights = {"data_3d": 1.0, "reprojection": 1.0, "root_smooth": c.weight_root_smooth, "shape": c.weight_shape,
                    "latent": c.weight_latent, "local_linear": local_linear, "seam": c.weight_seam,
                    "rest": c.weight_rest}
@@ -277,8 +279,9 @@ def fit_bodies(
         body: the body model (its dtype and device are the fit's).
         observations: the people's detections and triangulated joints (:func:`body_observations`).
         rig: the V cameras, held fixed.
-        prior: the motion VAE whose latents are fitted (the default prior, or the per-frame variant); None fits
-            raw joint angles (the no-prior baseline). Its weights are not changed.
+        prior: the motion VAE whose latents are fitted (the default prior, or the per-frame variant, whose
+            latents then get no local-linear term: the baseline without dynamics); None fits raw joint angles (the
+            no-prior baseline). Its weights are not changed.
         config: weights and schedule.
         fps: the sequence's frame rate (stored with the motions).
         warnings: warnings of the inputs (e.g. people left out), passed through to the result.
