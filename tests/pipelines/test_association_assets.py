@@ -20,8 +20,9 @@ from tests.pipelines.test_calibration_assets import SCENE, _stand_in_table
 PARTITION = "synthetic__calib"
 ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people", "gt_motions",
           "gt_camera_triangulation", "associations", "skeletons3d", "fitted_motions", "metric_tables"]
-FIT = {"iterations_body": 15}
-"""A shorter last stage than the default (the test checks the wiring and sane figures, not the best ones)."""
+FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10}
+"""A shorter fit than the default (the test checks the wiring and sane figures; ``tests/humancal/fitting`` and
+``scripts/body_sweep.py`` measure the fit itself)."""
 
 
 def _write(storage, asset, table, name):
@@ -118,7 +119,7 @@ def test_fitted_motions_and_body_metric_rows(materialized):
     for method in ("fit_init_cameras", "fit_gt_cameras", "fit_per_frame_prior", "fit_no_prior"):
         rows = metrics[metrics["method"] == method].set_index("metric")["value"]
         assert expected <= set(rows.index), (method, sorted(rows.index))
-        assert rows["mpjpe_mm"] < 60 and rows["pve_mm"] < 80 and rows["pcp_avg"] > 80, (method, rows.to_dict())
+        assert rows["mpjpe_mm"] < 60 and rows["pve_mm"] < 120 and rows["pcp_avg"] > 80, (method, rows.to_dict())
     for method in ("skeletons3d", "skeletons3d_gt_cameras"):
         rows = metrics[metrics["method"] == method].set_index("metric")["value"]
         assert {"mpjpe_mm", "pa_mpjpe_mm", "accel_error_mm_s2"} <= set(rows.index)

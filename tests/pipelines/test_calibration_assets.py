@@ -19,6 +19,9 @@ from resources.io_managers import partition_path
 
 PARTITION = "synthetic__calib"
 SCENE = {"preset": "demo", "seed": 11, "num_people": 3, "num_views": 4, "num_frames": 60}
+QUICK_FIT = {"iterations_3d": 40, "iterations_global": 2, "iterations_body": 3}
+"""The body fits of the graph, cut short: these tests are about the calibration (``test_association_assets`` and
+``tests/humancal/fitting`` check the fits)."""
 
 
 def _stand_in_table(scene) -> pd.DataFrame:
@@ -53,7 +56,9 @@ def materialized(tmp_path_factory, body_model):
     with dg.instance_for_test(temp_dir=str(tmp_path_factory.mktemp("home"))) as instance:
         instance.add_dynamic_partitions(SEQUENCES.name, [PARTITION])
         result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
-                                selection=dg.AssetSelection.assets(*keys), partition_key=PARTITION, instance=instance)
+                                selection=dg.AssetSelection.assets(*keys), partition_key=PARTITION, instance=instance,
+                                run_config={"ops": {"fitted_motions": {"config": QUICK_FIT},
+                                                    "metric_tables": {"config": QUICK_FIT}}})
     return result, storage
 
 
