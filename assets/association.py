@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import threadpoolctl
 
-from assets.common import UPDATE_CONDITION, png_metadata, table_metadata, table_output
+from assets.common import latest_metadata_float, UPDATE_CONDITION, png_metadata, table_metadata, table_output
 from assets.partitions import SEQUENCES
 from assets.settings import AssociationSettings
 from humancal.association import associate, to_associations_table, to_skeletons_table
@@ -69,9 +69,4 @@ def association(context: dg.AssetExecutionContext, config: AssociationSettings, 
 
 def latest_association_seconds(instance: dg.DagsterInstance, partition: str) -> float:
     """The run time of the latest ``associations`` materialization of a partition, seconds (NaN if unrecorded)."""
-    records = instance.fetch_materializations(
-        dg.AssetRecordsFilter(asset_key=dg.AssetKey("associations"), asset_partitions=[partition]), limit=1).records
-    if not records:
-        return float("nan")
-    value = records[0].asset_materialization.metadata.get("seconds_total")
-    return float(value.value) if value is not None else float("nan")
+    return latest_metadata_float(instance, "associations", partition, "seconds_total")

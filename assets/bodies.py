@@ -8,7 +8,7 @@ from pathlib import Path
 import dagster as dg
 import pandas as pd
 
-from assets.common import png_metadata, sequence_asset, table_output
+from assets.common import latest_metadata_float, png_metadata, sequence_asset, table_output
 from assets.settings import BodyFitSettings
 from humancal.camera import CameraRig
 from humancal.fitting import body_observations, fit_bodies
@@ -32,7 +32,7 @@ def _weights_digest(variant: str) -> str:
     return str(read_prior_info(SHIPPED_VARIANT_STEMS[variant])["digest"])[:12]
 
 
-CODE_VERSION = f"1-prior-{_weights_digest('motion_prior')}"
+CODE_VERSION = f"2-prior-{_weights_digest('motion_prior')}"
 """The code version names the shipped prior's weights digest: new weights make every fit stale."""
 
 
@@ -78,9 +78,4 @@ def fitted_motions(context: dg.AssetExecutionContext, config: BodyFitSettings, b
 
 def latest_fit_seconds(instance: dg.DagsterInstance, partition: str) -> float:
     """The fit time of the latest ``fitted_motions`` materialization of a partition, seconds (NaN if unrecorded)."""
-    records = instance.fetch_materializations(
-        dg.AssetRecordsFilter(asset_key=dg.AssetKey("fitted_motions"), asset_partitions=[partition]), limit=1).records
-    if not records:
-        return float("nan")
-    value = records[0].asset_materialization.metadata.get("seconds_total")
-    return float(value.value) if value is not None else float("nan")
+    return latest_metadata_float(instance, "fitted_motions", partition, "seconds_total")

@@ -25,7 +25,7 @@ from resources.datasets import DatasetsResource
 from resources.torch import TorchResource
 
 
-@sequence_asset("metrics", code_version="12")
+@sequence_asset("metrics", code_version="13")
 def metric_tables(
     context: dg.AssetExecutionContext,
     config: BodyFitSettings,

@@ -5,18 +5,20 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 from humancal.formats.errors import FormatError
 
-__all__ = ["atomic_write_text", "atomic_write_texts", "read_text", "load_json"]
+__all__ = ["atomic_write_with", "atomic_write_text", "atomic_write_texts", "read_text", "load_json"]
 
 
-def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically: a temporary file in the same folder, then ``os.replace``.
+def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
+    """Write a file atomically: ``write(handle)`` fills a temporary file in the same folder, then ``os.replace``.
 
     A failure at any point leaves ``path`` as it was (absent or with its previous content) and removes the
-    temporary file. The parent folder is created when missing.
+    temporary file. The parent folder is created when missing; the file gets the ordinary permissions (umask).
 
     Returns:
         The path written.
@@ -25,15 +27,23 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
+        with os.fdopen(fd, "wb") as handle:
+            write(handle)
             handle.flush()
             os.fsync(handle.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp_name, 0o666 & ~umask)  # mkstemp makes it private; a written file is an ordinary one
         os.replace(tmp_name, path)
     except BaseException:
         Path(tmp_name).unlink(missing_ok=True)
         raise
     return path
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8, ``\n`` line ends) to ``path`` atomically (see :func:`atomic_write_with`)."""
+    return atomic_write_with(path, lambda handle: handle.write(text.encode("utf-8")))
 
 
 def atomic_write_texts(texts_by_path: dict[Path, str]) -> list[Path]:

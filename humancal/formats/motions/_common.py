@@ -3,17 +3,14 @@
 from __future__ import annotations
 
 import logging
-import os
-import tempfile
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
 
 from humancal.body.bones import POSED_BONE_NAMES
 from humancal.fitting import FittedMotions
+from humancal.formats._io import atomic_write_with
 from humancal.formats.errors import FormatError
 
 __all__ = [
@@ -115,33 +112,6 @@ def check_motions(motions: object) -> FittedMotions:
     if not motions.present.any():
         raise FormatError(None, "FittedMotions.present", "at least one present (person, frame)", "none")
     return motions
-
-
-def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], None]) -> Path:
-    """Write a file atomically: ``write(handle)`` fills a temporary file in the same folder, then ``os.replace``.
-
-    A failure at any point leaves ``path`` as it was (absent or with its previous content) and removes the
-    temporary file. The parent folder is created when missing.
-
-    Returns:
-        The path written.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            write(handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp_name, 0o666 & ~umask)  # mkstemp makes it private; an export is an ordinary file
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
