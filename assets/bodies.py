@@ -1,14 +1,16 @@
-"""Per sequence: every person's body shape and motion, fitted to the associated detections through the motion
-prior with the estimated cameras held fixed (the paper's III-E; ``docs/bodies.md``)."""
+"""Per sequence: every person's body shape and motion fitted to the associated detections through the motion
+prior, and the cameras refined together with them (the paper's III-E; ``docs/bodies.md``, ``docs/refinement.md``)."""
 
 import functools
 import tempfile
 from pathlib import Path
 
 import dagster as dg
+import numpy as np
 import pandas as pd
 
-from assets.common import latest_metadata_float, png_metadata, sequence_asset, table_output
+from assets.common import UPDATE_CONDITION, latest_metadata_float, png_metadata, table_metadata, table_output
+from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
 from humancal.camera import CameraRig
 from humancal.fitting import body_observations, fit_bodies
@@ -32,18 +34,33 @@ def _weights_digest(variant: str) -> str:
     return str(read_prior_info(SHIPPED_VARIANT_STEMS[variant])["digest"])[:12]
 
 
-CODE_VERSION = f"2-prior-{_weights_digest('motion_prior')}"
+CODE_VERSION = f"3-prior-{_weights_digest('motion_prior')}"
 """The code version names the shipped prior's weights digest: new weights make every fit stale."""
 
 
-@sequence_asset("motions", code_version=CODE_VERSION, description=(
-    "Every person's anny body (phenotypes) and motion (bone rotations, root translation, keypoints) per frame, "
-    "fitted to the associated detections through the motion prior, the estimated cameras held fixed."))
-def fitted_motions(context: dg.AssetExecutionContext, config: BodyFitSettings, body_model: BodyModelResource,
-                   torch_runtime: TorchResource, datasets: DatasetsResource, detections: pd.DataFrame,
-                   associations: pd.DataFrame, skeletons3d: pd.DataFrame, extrinsics: pd.DataFrame) -> dg.Output:
-    """Fit shape and motion of every tracked person (``humancal.fitting.fit_bodies``): from the detections, the
-    association and the self-calibrated cameras only (never ground truth)."""
+_OUTPUTS = {
+    "fitted_motions": ("motions", "Every person's anny body (phenotypes) and motion (bone rotations, root "
+                                  "translation, keypoints) per frame, fitted to the associated detections through "
+                                  "the motion prior, the cameras refined with them."),
+    "refined_cameras": ("cameras", "The cameras refined together with the people's bodies and motions (focal "
+                                   "length and extrinsics unless the settings hold some), in the same world as "
+                                   "fitted_motions (floor at z = 0)."),
+}
+
+
+@dg.multi_asset(
+    outs={name: dg.AssetOut(description=desc, metadata=table_metadata(table), code_version=CODE_VERSION,
+                            automation_condition=UPDATE_CONDITION)
+          for name, (table, desc) in _OUTPUTS.items()},
+    partitions_def=SEQUENCES,
+    group_name="sequence",
+)
+def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_model: BodyModelResource,
+             torch_runtime: TorchResource, datasets: DatasetsResource, detections: pd.DataFrame,
+             associations: pd.DataFrame, skeletons3d: pd.DataFrame, extrinsics: pd.DataFrame):
+    """Fit shape and motion of every tracked person and refine the cameras with them
+    (``humancal.fitting.fit_bodies``): from the detections, the association and the self-calibrated cameras only
+    (never ground truth)."""
     sequence = context.partition_key
     fps, fps_source = sequence_fps(datasets.spec(sequence))
     dense, _ = lifted_from_table(detections)
@@ -58,22 +75,43 @@ def fitted_motions(context: dg.AssetExecutionContext, config: BodyFitSettings, b
         result = fit_bodies(body, observations, rig, fitting_prior(), config.to_library(), fps=fps,
                             warnings=tuple(warnings))
     table = result.motions.to_table(sequence)
+    refined = result.cameras
     with tempfile.TemporaryDirectory() as tmp:
         pictures = {
-            "reprojection": png_metadata(plot_fit_reprojection(body, result.motions, observations, rig,
+            "reprojection": png_metadata(plot_fit_reprojection(body, result.motions, observations, refined,
                                                                Path(tmp) / "reprojection.png"),
                                          "fitted meshes reprojected over the detections"),
-            "scene": png_metadata(plot_fit_scene(body, result.motions, rig, Path(tmp) / "scene.png"),
+            "scene": png_metadata(plot_fit_scene(body, result.motions, refined, Path(tmp) / "scene.png"),
                                   "the fitted people and the cameras in 3D"),
         }
     context.log.info(f"{sequence}: {result.motions.num_people} bodies fitted in {result.stage_seconds['total']:.1f} s, "
                      f"reprojection {result.reprojection_error_px:.2f} px")
-    return table_output(
-        table, "motions", rows=len(table), num_people=result.motions.num_people, fps=fps,
-        reprojection_error_px=round(result.reprojection_error_px, 3),
+    for warning in result.warnings[len(warnings):]:
+        context.log.warning(warning)
+    yield table_output(
+        table, "motions", output_name="fitted_motions", rows=len(table), num_people=result.motions.num_people,
+        fps=fps, reprojection_error_px=round(result.reprojection_error_px, 3), cameras=config.cameras,
         **{f"seconds_{stage}": round(s, 3) for stage, s in result.stage_seconds.items()},
         **{f"loss_{term}": float(v) for term, v in result.loss_terms.items()},
-        prior_weights=_weights_digest("motion_prior"), warnings="; ".join(warnings) or "none", **pictures)
+        prior_weights=_weights_digest("motion_prior"), warnings="; ".join(result.warnings) or "none", **pictures)
+    changes = _camera_changes(rig, refined)
+    context.log.info(f"{sequence}: cameras ({config.cameras}) moved by " + ", ".join(
+        f"{k} {v:.3g}" for k, v in changes.items()))
+    yield table_output(refined.to_table(sequence), "cameras", output_name="refined_cameras", rows=len(refined),
+                       regime=config.cameras, **changes)
+
+
+def _camera_changes(before: CameraRig, after: CameraRig) -> dict[str, float]:
+    """How far the refinement moved the cameras (means over views): focal %, centre mm, orientation deg."""
+    focal = np.sqrt(after.K[:, 0, 0] * after.K[:, 1, 1]) / np.sqrt(before.K[:, 0, 0] * before.K[:, 1, 1])
+    relative = np.einsum("vij,vkj->vik", after.R_cam_from_world, before.R_cam_from_world)
+    cos = np.clip((np.trace(relative, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return {
+        "focal_change_pct": float(np.mean(np.abs(focal - 1.0)) * 100.0),
+        "centre_change_mm": float(np.linalg.norm(after.centers_world_m - before.centers_world_m, axis=1).mean()
+                                  * 1000.0),
+        "angle_change_deg": float(np.degrees(np.arccos(cos)).mean()),
+    }
 
 
 def latest_fit_seconds(instance: dg.DagsterInstance, partition: str) -> float:

@@ -7,12 +7,12 @@ import dagster as dg
 import pandas as pd
 
 from assets.association import latest_association_seconds
-from assets.bodies import fitting_prior, latest_fit_seconds
+from assets.bodies import latest_fit_seconds
 from assets.settings import BodyFitSettings
 from assets.checks import latest_check_outcomes
 from assets.common import png_metadata, sequence_asset, table_output
 from evaluation.association_metrics import association_metric_table
-from evaluation.body_metrics import BodyFitInputs, body_metric_table
+from evaluation.body_metrics import pipeline_body_table
 from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
 from evaluation.rig_plot import plot_rig_comparison
@@ -25,7 +25,7 @@ from resources.datasets import DatasetsResource
 from resources.torch import TorchResource
 
 
-@sequence_asset("metrics", code_version="13")
+@sequence_asset("metrics", code_version="14")
 def metric_tables(
     context: dg.AssetExecutionContext,
     config: BodyFitSettings,
@@ -43,12 +43,14 @@ def metric_tables(
     associations: pd.DataFrame,
     skeletons3d: pd.DataFrame,
     fitted_motions: pd.DataFrame,
+    refined_cameras: pd.DataFrame,
     gt_motions: pd.DataFrame,
 ) -> dg.Output:
     """MPJPE, PCP and reprojection error of each method; the lifter's 3D and height errors; the camera
     initialisation's focal, position, angle and reprojection errors; detection grouping on real datasets; who is
-    who; the fitted bodies against the triangulated skeletons (``evaluation.body_metrics``; the settings are the
-    ``fitted_motions`` asset's: give both the same run config to change them).
+    who; the pipeline's fitted bodies and refined cameras (method ``int_ext`` with the default settings) against the
+    triangulated skeletons (``evaluation.body_metrics``; ``config`` must be the body fit's: it names the regime).
+    The other regimes of the paper's Tables are fitted by ``method_tables`` (on request).
     The camera rows name the checks of ``extrinsics`` that its cameras failed (column ``failed_checks``)."""
     spec = datasets.spec(context.partition_key)
     gt = cameras_from_table(gt_cameras)
@@ -81,17 +83,14 @@ def metric_tables(
                 seconds=latest_association_seconds(context.instance, context.partition_key),
                 lifted_detections=detections, cameras=estimated, gt_associations=gt_associations,
                 gt_poses3d=gt_poses3d, gt_cameras=gt, failed_checks=failed))
-            body = body_model.get()
-            models = BodyFitInputs(body=body, prior=fitting_prior(), per_frame_prior=fitting_prior("per_frame"),
-                                   config=config.to_library(), fps=sequence_fps(spec)[0])
             with torch_runtime.applied():
-                parts.append(body_metric_table(
-                    spec, models, fitted_motions=fitted_motions,
+                parts.append(pipeline_body_table(
+                    spec, body=body_model.get(), regime=config.cameras, fps=sequence_fps(spec)[0],
+                    fitted_motions=fitted_motions, refined_cameras=cameras_from_table(refined_cameras),
                     fit_seconds=latest_fit_seconds(context.instance, context.partition_key),
                     associations=associations, skeletons3d=skeletons3d, lifted_detections=detections,
                     detections=raw_detections, cameras=estimated, gt_associations=gt_associations,
-                    gt_poses3d=gt_poses3d, gt_cameras=gt, gt_motions=gt_motions, failed_checks=failed,
-                    log=context.log.info))
+                    gt_poses3d=gt_poses3d, gt_cameras=gt, gt_motions=gt_motions, failed_checks=failed))
     else:
         context.log.info(f"{spec.key}: no known cameras: no metric rows (the calibrated cameras are in extrinsics)")
     table = pd.concat(parts, ignore_index=True) if parts else empty_table("metrics")
@@ -103,6 +102,11 @@ def metric_tables(
             png = plot_rig_comparison(estimated, gt, raw_detections, gt_associations, Path(tmp) / "rigs.png",
                                       title=f"{spec.key}: initial cameras (aligned) and ground truth")
             pictures["rigs"] = png_metadata(png, "camera rigs")
+            if len(refined_cameras):
+                png = plot_rig_comparison(cameras_from_table(refined_cameras), gt, raw_detections, gt_associations,
+                                          Path(tmp) / "refined_rigs.png",
+                                          title=f"{spec.key}: refined cameras ({config.cameras}, aligned) and ground truth")
+                pictures["refined_rigs"] = png_metadata(png, "refined camera rigs")
     return table_output(
         table, "metrics", rows=len(table), **pictures,
         summary=dg.MetadataValue.md(headline.to_markdown(index=False, floatfmt=".2f")),

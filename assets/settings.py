@@ -175,8 +175,8 @@ _B = BodyFitConfig
 
 
 class BodyFitSettings(dg.Config):
-    """Settings of the ``fitted_motions`` asset (:class:`humancal.fitting.BodyFitConfig`); the metric table's body
-    rows fit with the same settings."""
+    """Settings of the body fit (``fitted_motions`` and ``refined_cameras``; :class:`humancal.fitting.BodyFitConfig`);
+    the comparison fits of ``method_tables`` use the same settings."""
 
     PIPELINE_DEFAULTS: ClassVar[dict[str, Any]] = {}
 
@@ -199,6 +199,14 @@ class BodyFitSettings(dg.Config):
     iterations_global: int = library_field(_B, "iterations_global")
     iterations_body: int = library_field(_B, "iterations_body")
     fit_shape: bool = library_field(_B, "fit_shape")
+    cameras: str = library_field(_B, "cameras")
+    refine_k1: bool = library_field(_B, "refine_k1")
+    rounds: int = library_field(_B, "rounds")
+    iterations_cameras: int = library_field(_B, "iterations_cameras")
+    weight_camera_prior: float = library_field(_B, "weight_camera_prior")
+    camera_prior_scale_m: float = library_field(_B, "camera_prior_scale_m")
+    weight_interpenetration: float = library_field(_B, "weight_interpenetration")
+    contact_scale_m: float = library_field(_B, "contact_scale_m")
 
     def to_library(self) -> BodyFitConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""

@@ -1,13 +1,9 @@
 """Figures of the fitted bodies against the ground truth, beside the triangulated skeletons they start from.
 
-Methods (metric-table names):
-
-* ``fit_init_cameras``: the pipeline's ``fitted_motions`` (estimated cameras held fixed, the default prior);
-* ``fit_gt_cameras``: the same fit with the true cameras (and the association run with them): what the fit gives
-  when the calibration is perfect;
-* ``fit_per_frame_prior``: the estimated cameras, the per-frame pose prior (no dynamics);
-* ``fit_no_prior``: the estimated cameras, raw joint angles (no prior);
-* ``skeletons3d`` and ``skeletons3d_gt_cameras``: the association's triangulated skeletons, the fits' baseline.
+Methods (metric-table names): the pipeline's own fit (``int_ext`` with the default settings: cameras refined
+with the bodies; :data:`PIPELINE_METHOD`), and ``skeletons3d`` / ``skeletons3d_gt_cameras``, the association's
+triangulated skeletons (the fits' baseline). The other regimes of the paper's Tables are fitted and scored by
+``evaluation.method_comparison`` with the rows defined here.
 
 Every fitted person is matched to a true person per frame through the detections it was fitted to (as the
 skeletons: ``evaluation.association_metrics.skeletons_in_truth``) and moved into the ground-truth world by the
@@ -21,7 +17,6 @@ estimated world) and ``seconds``.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,14 +29,13 @@ from humancal.association import associate, to_associations_table, to_skeletons_
 from humancal.body import BodyModel
 from humancal.calibration.alignment import align_rig
 from humancal.camera import Camera, CameraRig
-from humancal.fitting import BodyFitConfig, FittedMotions, body_observations, fit_bodies
+from humancal.fitting import FittedMotions
 from humancal.keypoints import CANONICAL_JOINTS
 from humancal.lifter import lifted_from_table
 from humancal.poses import poses_to_dense
-from humancal.prior import MotionVAE
 from humancal.sequences import SequenceSpec
 
-__all__ = ["BodyFitInputs", "body_metric_rows", "body_metric_table", "keypoints_table", "skeleton_accel_rows"]
+__all__ = ["PIPELINE_METHOD", "body_metric_rows", "keypoints_table", "pipeline_body_table", "skeleton_accel_rows"]
 
 PVE_MAX_FRAMES = 60
 """Frames per person whose vertices the PVE compares (evenly spread; a full mesh per frame is costly)."""
@@ -167,71 +161,44 @@ def skeleton_accel_rows(spec: SequenceSpec, *, skeletons3d: pd.DataFrame, associ
     return rows
 
 
-@dataclass(frozen=True)
-class BodyFitInputs:
-    """What the body rows need besides the tables (the models, and the pipeline fit's settings)."""
-
-    body: BodyModel
-    prior: MotionVAE
-    per_frame_prior: MotionVAE | None
-    config: BodyFitConfig
-    fps: float
+PIPELINE_METHOD = {"int_ext": "int_ext", "ext": "ext_init_focal", "fixed": "init"}
+"""The method name of the pipeline's own fit per camera regime (``BodyFitConfig.cameras``): with the default
+(``int_ext``) the fit is the paper's fully self-calibrated row; with the cameras held it is the ``init`` row."""
 
 
-def body_metric_table(spec: SequenceSpec, models: BodyFitInputs, *, fitted_motions: pd.DataFrame, fit_seconds: float,
-                      associations: pd.DataFrame, skeletons3d: pd.DataFrame, lifted_detections: pd.DataFrame,
-                      detections: pd.DataFrame, cameras: list[Camera], gt_associations: pd.DataFrame,
-                      gt_poses3d: pd.DataFrame, gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
-                      failed_checks: str | None = None, log=None) -> pd.DataFrame:
-    """Rows of every body method of the module docstring (the pipeline's fit read, the others fitted here; they
-    never feed the pipeline).
+def pipeline_body_table(spec: SequenceSpec, *, body: BodyModel, regime: str, fps: float, fitted_motions: pd.DataFrame,
+                        refined_cameras: list[Camera], fit_seconds: float, associations: pd.DataFrame,
+                        skeletons3d: pd.DataFrame, lifted_detections: pd.DataFrame, detections: pd.DataFrame,
+                        cameras: list[Camera], gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
+                        gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
+                        failed_checks: str | None = None) -> pd.DataFrame:
+    """Rows of the pipeline's own fit (method :data:`PIPELINE_METHOD` of its regime: body rows, and the refined
+    cameras' rows when they moved) and of the triangulated skeletons it started from (``skeletons3d``; and
+    ``skeletons3d_gt_cameras``, the association redone with the true cameras, evaluation only).
 
     Args:
-        fitted_motions, fit_seconds: the pipeline's ``fitted_motions`` and its fit time.
-        associations, skeletons3d: the pipeline's association (estimated cameras).
-        lifted_detections: the ``detections`` asset (2D + lifted poses), for the association with the true cameras.
+        regime: the fit's camera regime; refined_cameras: the cameras it ended with; fit_seconds: its wall time.
+        associations, skeletons3d: the pipeline's association (init cameras); cameras: the init cameras.
+        lifted_detections: the ``detections`` asset (2D + lifted), for the association with the true cameras.
         detections: the 2D detections.
-        failed_checks: the checks the estimated cameras failed (as the camera rows).
-        log: called with a line per method fitted here.
+        failed_checks: the checks the init cameras failed (as the camera rows).
     """
-    say = log or (lambda message: None)
-    dense, lifted = lifted_from_table(lifted_detections)
-    common = dict(detections=detections, gt_associations=gt_associations, gt_poses3d=gt_poses3d,
-                  gt_cameras=gt_cameras, gt_motions=gt_motions, body=models.body, fps=models.fps)
-
-    def fit(people: pd.DataFrame, skeletons: pd.DataFrame, used: list[Camera], prior: MotionVAE | None):
-        start = time.perf_counter()
-        observations, _ = body_observations(dense, people, skeletons, len(used))
-        result = fit_bodies(models.body, observations, CameraRig.from_cameras(used), prior, models.config,
-                            fps=models.fps)
-        return result.motions.to_table(spec.sequence), time.perf_counter() - start
+    from evaluation.method_comparison import camera_and_body_rows
 
     parts = []
-    rows = body_metric_rows(spec, motions=fitted_motions, seconds=fit_seconds, associations=associations,
-                            cameras=cameras, **common)
-    parts.append(metrics_table(spec.dataset, spec.sequence, "fit_init_cameras", rows, failed_checks))
-    # the same association and fit with the true cameras (evaluation only)
-    true_rig = CameraRig.from_cameras(gt_cameras)
-    result = associate(dense, lifted, true_rig)
+    rows = camera_and_body_rows(
+        spec, motions=fitted_motions, cameras=refined_cameras, seconds=fit_seconds, associations=associations,
+        detections=detections, gt_associations=gt_associations, gt_poses3d=gt_poses3d, gt_cameras=gt_cameras,
+        gt_motions=gt_motions, body=body, fps=fps, with_cameras=regime != "fixed")
+    parts.append(metrics_table(spec.dataset, spec.sequence, PIPELINE_METHOD[regime], rows, failed_checks))
+    dense, lifted = lifted_from_table(lifted_detections)
+    result = associate(dense, lifted, CameraRig.from_cameras(gt_cameras))
     gt_people, gt_skeletons = to_associations_table(result, spec.sequence), to_skeletons_table(result, spec.sequence)
-    motions, seconds = fit(gt_people, gt_skeletons, gt_cameras, models.prior)
-    say(f"fit_gt_cameras: {seconds:.1f} s")
-    rows = body_metric_rows(spec, motions=motions, seconds=seconds, associations=gt_people, cameras=gt_cameras, **common)
-    parts.append(metrics_table(spec.dataset, spec.sequence, "fit_gt_cameras", rows, None))
-    ablations = {"fit_no_prior": None}
-    if models.per_frame_prior is not None:
-        ablations = {"fit_per_frame_prior": models.per_frame_prior, **ablations}
-    for method, prior in ablations.items():
-        motions, seconds = fit(associations, skeletons3d, cameras, prior)
-        say(f"{method}: {seconds:.1f} s")
-        rows = body_metric_rows(spec, motions=motions, seconds=seconds, associations=associations, cameras=cameras,
-                                **common)
-        parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed_checks))
     for method, (people, skeletons, used, failed) in {
         "skeletons3d": (associations, skeletons3d, cameras, failed_checks),
         "skeletons3d_gt_cameras": (gt_people, gt_skeletons, gt_cameras, None),
     }.items():
-        rows = skeleton_accel_rows(spec, skeletons3d=skeletons, associations=people, fps=models.fps, cameras=used,
+        rows = skeleton_accel_rows(spec, skeletons3d=skeletons, associations=people, fps=fps, cameras=used,
                                    gt_associations=gt_associations, gt_poses3d=gt_poses3d, gt_cameras=gt_cameras)
         parts.append(metrics_table(spec.dataset, spec.sequence, method, rows, failed))
     return pd.concat(parts, ignore_index=True)

@@ -23,6 +23,13 @@ Tables:
                   is null for a figure that is not per view; ``failed_checks`` names the checks that the estimated
                   cameras a figure was computed from failed (comma-separated; empty: they passed every check; null:
                   not computed from estimated cameras).
+    benchmark:    every sequence's headline figures beside the paper's and the peers' (dataset, sequence, method,
+                  metric, source, value, unit, paper_table, failed_checks); ``source`` is ``humancal``, ``paper`` or
+                  the peer measured here; ``sequence`` is null for the paper's figures (per dataset);
+                  ``paper_table`` names the paper's table (null for figures measured here).
+    stage_timings: wall seconds of the latest materialization of each per-sequence asset (sequence = the partition
+                  key, asset, step, seconds, run_id, materialized_at); asset ``total`` sums the distinct steps from
+                  ``detections`` to ``metric_tables`` (run_id, materialized_at null).
 """
 
 from __future__ import annotations
@@ -187,6 +194,29 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("failed_checks", pa.string()),
         ]
     ),
+    "benchmark": pa.schema(
+        [
+            ("dataset", pa.string()),
+            ("sequence", pa.string()),
+            ("method", pa.string()),
+            ("metric", pa.string()),
+            ("source", pa.string()),
+            ("value", pa.float64()),
+            ("unit", pa.string()),
+            ("paper_table", pa.string()),
+            ("failed_checks", pa.string()),
+        ]
+    ),
+    "stage_timings": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("asset", pa.string()),
+            ("step", pa.string()),
+            ("seconds", pa.float64()),
+            ("run_id", pa.string()),
+            ("materialized_at", pa.timestamp("us", tz="UTC")),
+        ]
+    ),
 }
 """The declared schema of every canonical table, by table name."""
 
@@ -194,7 +224,11 @@ SCHEMAS: dict[str, pa.Schema] = {
 SCHEMAS["skeletons3d"] = SCHEMAS["poses3d"].insert(SCHEMAS["poses3d"].get_field_index("valid"),
                                                    pa.field("num_views", pa.int32()))
 
-NULLABLE_COLUMNS: dict[str, frozenset[str]] = {"metrics": frozenset({"view", "failed_checks"})}
+NULLABLE_COLUMNS: dict[str, frozenset[str]] = {
+    "metrics": frozenset({"view", "failed_checks"}),
+    "benchmark": frozenset({"sequence", "paper_table", "failed_checks"}),
+    "stage_timings": frozenset({"run_id", "materialized_at"}),
+}
 """Columns that may hold nulls (every other column of every table must be filled), by table name. In pandas a
 nullable integer column is a nullable ``Int32`` column (``pd.NA`` for null)."""
 

@@ -3,6 +3,7 @@
     humancal demo                        materialize what synthetic__demo needs (the lifter first), print its metrics
     humancal update [--partition P ...]  materialize only what is missing or stale
     humancal report [--partition P] [--format md|csv]   (P may also be cmu_mocap__held_out_02_14)
+    humancal report --benchmark [--partition P]   ours beside the paper's numbers, and the per-stage seconds
     humancal export detections|cameras --partition P --format F --out PATH
     humancal export motions --partition P --format bvh|gltf|npz|obj --out DIR [--frames A:B[:S]] [--fps F]
     humancal train lifter [--discard]    train the lifter here (replaces the shipped weights), or go back to them
@@ -247,6 +248,10 @@ def _explain_missing_tables(missing: list[str]) -> str:
 
 
 def cmd_report(args) -> int:
+    if args.benchmark:  # pipelines/benchmark_report.py
+        from pipelines.benchmark_report import report_benchmark
+
+        return report_benchmark(args, _instance)
     # Markdown is for reading: headline rows unless --all; CSV is for tools: every row.
     _print_metrics(_stored_metrics(args.partition, headline_only=args.format == "md" and not args.all), args.format)
     return 0
@@ -411,6 +416,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--partition", action="append", help="only this partition (repeatable)")
     p.add_argument("--format", choices=("md", "csv"), default="md")
     p.add_argument("--all", action="store_true", help="md: include per-joint / per-view rows (csv always has them)")
+    p.add_argument("--benchmark", action="store_true",
+                   help="ours beside the paper's numbers (benchmark_table) and the per-stage seconds")
     p.set_defaults(func=cmd_report)
     p = sub.add_parser("export", help="write stored detections, cameras or fitted motions in another tool's format")
     p.add_argument("what", choices=("detections", "cameras", "motions"))

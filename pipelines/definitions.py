@@ -6,9 +6,11 @@ import dagster as dg
 
 from assets.association import association
 from assets.baselines import gt_camera_triangulation
-from assets.bodies import fitted_motions
+from assets.benchmark import build_benchmark_assets
+from assets.bodies import body_fit
 from assets.calibration import detections, extrinsics, intrinsics
 from assets.lifter import build_lifter_assets
+from assets.method_tables import method_tables
 from assets.metric_tables import metric_tables
 from assets.mocap import mocap_clips
 from assets.motion_prior import PriorEvaluationSettings, build_motion_prior_assets
@@ -25,7 +27,7 @@ from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFa
 from resources.torch import TorchResource
 
 PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, association,
-                       fitted_motions, metric_tables]
+                       body_fit, metric_tables, method_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
 SHARED_ASSETS = [sequence_registry, mocap_clips]
@@ -64,7 +66,9 @@ def build_definitions(
     prior_assets = build_motion_prior_assets(prior_configs, prior_evaluation)
     prior_training = prior_training_job()
     return dg.Definitions(
-        assets=[*SHARED_ASSETS, *lifter_assets, *prior_assets, *PER_SEQUENCE_ASSETS],
+        # benchmark_table, stage_timings (group benchmark_summary): unpartitioned, read every partition's tables
+        assets=[*SHARED_ASSETS, *lifter_assets, *prior_assets, *PER_SEQUENCE_ASSETS,
+                *build_benchmark_assets(root, PER_SEQUENCE_ASSETS)],
         jobs=[
             dg.define_asset_job("sequence_job", selection=dg.AssetSelection.groups("sequence"),
                                 description="Every per-sequence asset of one partition."),

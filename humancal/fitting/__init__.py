@@ -1,10 +1,14 @@
-"""Fitting the people's bodies and motions to the associated detections (the paper's III-E, cameras held).
+"""Fitting the people's bodies and motions, and refining the cameras with them (the paper's III-E).
 
 ``body_observations`` gathers what the association found (each person's detections in every view, their
-triangulated joints); ``fit_bodies`` fits shape and motion through the motion prior; ``FittedMotions`` is the
-result and its ``motions`` table.
+triangulated joints); ``fit_bodies`` fits shape and motion through the motion prior and, unless told to hold them,
+refines the cameras together with the people (``CameraVariables``); ``FittedMotions`` is the result and its
+``motions`` table. ``bundle_adjust`` refines the cameras on the triangulated joints alone (the "separate"
+baseline).
 """
 
+from humancal.fitting.bundle import BundleResult, bundle_adjust
+from humancal.fitting.cameras import CAMERA_REGIMES, CameraVariables
 from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.fit import INITIAL_PHENOTYPES, STAGES, BodyFitResult, fit_bodies
 from humancal.fitting.motions import FittedMotions
@@ -13,6 +17,9 @@ from humancal.fitting.windows import WindowLayout, window_layout
 
 __all__ = [
     "BodyFitConfig",
+    "BundleResult",
+    "CAMERA_REGIMES",
+    "CameraVariables",
     "BodyFitResult",
     "BodyObservations",
     "FittedMotions",
@@ -21,6 +28,7 @@ __all__ = [
     "STAGES",
     "WindowLayout",
     "body_observations",
+    "bundle_adjust",
     "fit_bodies",
     "window_layout",
 ]

@@ -8,7 +8,10 @@ from typing import Any
 
 __all__ = ["BodyFitConfig"]
 
-_INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iterations_global", "iterations_body")
+_INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iterations_global", "iterations_body",
+                   "iterations_cameras", "rounds")
+_CHOICE_FIELDS = {"cameras": ("fixed", "ext", "int_ext")}  # humancal.fitting.cameras.CAMERA_REGIMES
+_BOOL_FIELDS = ("fit_shape", "refine_k1")
 
 
 @dataclass(frozen=True)
@@ -46,6 +49,19 @@ class BodyFitConfig:
             detections, pose and shape held).
         iterations_body: L-BFGS iterations of the body stage (everything on the 2D detections).
         fit_shape: whether the phenotypes are fitted (else the average adult body).
+        cameras: which camera parameters move (``humancal.fitting.cameras``): ``fixed``, ``ext`` (extrinsics) or
+            ``int_ext`` (focal length and extrinsics: fully self-calibrated).
+        refine_k1: whether each view's first radial distortion coefficient moves too (with ``ext``/``int_ext``).
+        rounds: how many times the three substages on the 2D detections (cameras, global, body) run in turn
+            (with ``fixed`` cameras, the camera substage is skipped).
+        iterations_cameras: L-BFGS iterations of the camera substage (bodies held).
+        weight_camera_prior: weight of the mean squared camera change from the initial cameras (focal in log
+            units, rotation in radians, centre in units of ``camera_prior_scale_m``); a weak tie that keeps views
+            with few observations in place.
+        camera_prior_scale_m: the camera centre change that costs as much as a unit log-focal change, metres.
+        weight_interpenetration: weight of the sphere-proxy interpenetration penalty between people
+            (``humancal.fitting.contact``; squared overlap depth in units of ``contact_scale_m``).
+        contact_scale_m: the overlap depth that costs one unit, metres.
     """
 
     noise_px: float = 15.0
@@ -67,19 +83,31 @@ class BodyFitConfig:
     iterations_body: int = 30
     learning_rate_3d: float = 0.05
     fit_shape: bool = True
+    cameras: str = "int_ext"
+    refine_k1: bool = False
+    rounds: int = 3
+    iterations_cameras: int = 50
+    weight_camera_prior: float = 1e-4
+    camera_prior_scale_m: float = 0.1
+    weight_interpenetration: float = 1.0
+    contact_scale_m: float = 0.01
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name == "fit_shape":
+            if f.name in _CHOICE_FIELDS:
+                if value not in _CHOICE_FIELDS[f.name]:
+                    raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be one of {list(_CHOICE_FIELDS[f.name])}")
+            elif f.name in _BOOL_FIELDS:
                 if not isinstance(value, bool):
-                    raise ValueError(f"BodyFitConfig.fit_shape={value!r} must be True or False")
+                    raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be True or False")
             elif f.name in _INTEGER_FIELDS:
                 if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                     raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be an integer >= 0")
             elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be a finite number >= 0")
-        for name in ("noise_px", "robust_scale_px", "noise_3d_m", "robust_scale_3d_m", "root_smooth_scale_m"):
+        for name in ("noise_px", "robust_scale_px", "noise_3d_m", "robust_scale_3d_m", "root_smooth_scale_m",
+                     "camera_prior_scale_m", "contact_scale_m"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"BodyFitConfig.{name} must be > 0")
         if self.learning_rate_3d <= 0:

@@ -4,10 +4,15 @@ Variables per person: the body shape (anny phenotypes, through a logistic map so
 root orientation (6D) and translation of every frame, and the body pose of every frame: the motion prior's
 latent codes (T x 32, decoder frozen) or, for the no-prior baseline, the 21 bones' 6D rotations.
 
+Variables per camera (``BodyFitConfig.cameras``, ``humancal.fitting.cameras``): none (``fixed``), the extrinsics
+(``ext``), or the focal length and the extrinsics (``int_ext``: fully self-calibrated).
+
 Objective (``BodyFitConfig`` documents the units): a confidence-weighted Geman-McClure reprojection term of the
 23 canonical keypoints in every view, through the shared camera model (``humancal.geometry.projection``); the
 latent prior ``mean(z^2)``; the local-linear term ``mean((z[t+1] - 2 z[t] + z[t-1])^2)``; a shape prior; a root
-smoothness term; and, for long sequences cut into windows (``humancal.fitting.windows``), a seam term.
+smoothness term; for long sequences cut into windows (``humancal.fitting.windows``), a seam term; the
+interpenetration of different people (``humancal.fitting.contact``); and, when the cameras move, a weak tie of
+each camera to its initial value.
 
 Schedule: the root of each frame starts from a rigid alignment of the average body onto the triangulated
 joints (``skeletons3d``); then three stages run on all people and all windows at once:
@@ -17,8 +22,14 @@ joints (``skeletons3d``); then three stages run on all people and all windows at
    all of them converged several times slower in the trials on synthetic scenes); the latents
    start from the prior's encoding of the reference pose. (Starting them from the encoding of a raw-angle
    inverse kinematics was tried and is worse: its poses are far from the prior's, and decode 90 mm away.)
-2. ``global``: root orientation and translation on the 2D detections, body held, by L-BFGS;
-3. ``body``: everything on the 2D detections, by L-BFGS.
+2. ``cameras`` (when they move): the cameras on the 2D detections, the people held, by L-BFGS;
+3. ``global``: root orientation and translation on the 2D detections, body and cameras held, by L-BFGS;
+4. ``body``: every person's variables on the 2D detections, cameras held, by L-BFGS.
+
+Stages 2-4 are the paper's three substages; they run ``rounds`` times in turn when the cameras move (once when
+they are fixed). Holding the people while the cameras move (and the other way round) keeps the world frame where
+the calibration put it: nothing can drift along the similarity that moves everything at once. At the end the floor
+is put back at z = 0 (the median lowest sole point of the standing person-frames, as the calibration defines it).
 
 Per-frame work runs on the body model's compact keypoint path; no mesh is built here.
 """
@@ -36,10 +47,14 @@ from torch import Tensor
 
 from humancal.body import BodyModel
 from humancal.camera import CameraRig
+from humancal.calibration.types import FOOT_JOINTS
+from humancal.fitting.cameras import CameraVariables
 from humancal.fitting.config import BodyFitConfig
+from humancal.fitting.contact import interpenetration
 from humancal.fitting.motions import FittedMotions
 from humancal.fitting.observations import BodyObservations, FittingInputError
 from humancal.fitting.windows import window_layout
+from humancal.lifter.pose_cues import standing_score
 from humancal.prior.config import NUM_PRIOR_BONES
 from humancal.prior.fitting import KeypointObservations, initial_root
 from humancal.prior.model import MotionVAE, identity_pose6d, pose6d_to_rotmats, rotmats_to_pose6d, with_root
@@ -51,7 +66,7 @@ log = logging.getLogger(__name__)
 INITIAL_PHENOTYPES = (0.5, 2.0 / 3.0, 0.5, 0.5, 0.5, 0.5)
 """Where every body starts: an average young adult (anny's gender 0.5, age 2/3 = 25 years, the rest at 0.5)."""
 
-STAGES = ("fit3d", "global", "body")
+STAGES = ("fit3d", "cameras", "global", "body")
 
 
 @dataclass(frozen=True)
@@ -60,8 +75,11 @@ class BodyFitResult:
 
     Attributes:
         motions: the fitted people (``FittedMotions``).
+        cameras: the cameras after the fit (the initial ones when ``BodyFitConfig.cameras`` is ``fixed``), in the
+            same world as the motions.
         latents: (P, W, L, latent_dim) the fitted latent windows (prior fits), else None.
-        stage_seconds: wall seconds of ``prepare``, each stage of ``STAGES`` and ``total``.
+        stage_seconds: wall seconds of ``prepare``, each stage of ``STAGES`` (summed over rounds), ``floor`` and
+            ``total``.
         loss_terms: every term of the objective after the last stage (unweighted), and ``total`` (weighted).
         reprojection_error_px: mean pixel distance between the fitted keypoints and the detected ones, over every
             detected keypoint (score > 0) in front of its camera.
@@ -69,6 +87,7 @@ class BodyFitResult:
     """
 
     motions: FittedMotions
+    cameras: CameraRig
     latents: np.ndarray | None
     stage_seconds: dict[str, float]
     loss_terms: dict[str, float]
@@ -106,7 +125,11 @@ class _Problem:
         to = self.to = dict(dtype=body.dtype, device=body.device)
         P, T = observations.num_people, observations.num_frames
         self.P, self.T = P, T
-        self.rig = rig.to_torch(**to)
+        self.cameras = CameraVariables(rig, config.cameras, refine_k1=config.refine_k1, **to)
+        self.fixed_rig = rig.to_torch(**to) if not self.cameras.moves else None
+        self.present = torch.as_tensor(observations.present, device=body.device)
+        self.centre0_m = self.cameras.centre_m.detach().clone()
+        self.held_people: tuple[Tensor, Tensor | None, Tensor] | None = None
         self.keypoints_px = torch.as_tensor(observations.keypoints_px, **to)
         self.confidence = torch.as_tensor(observations.confidence, **to)
         self.joints = torch.as_tensor(observations.joints_world_m, **to)
@@ -159,7 +182,10 @@ class _Problem:
         return with_root(pose6d_to_rotmats(pose6d), pose6d_to_rotmats(self.root6d))
 
     def keypoints(self) -> tuple[Tensor, Tensor | None, Tensor]:
-        """(P, T, 23, 3) keypoints, the seam differences and the (P, T, 22, 3, 3) bone rotations."""
+        """(P, T, 23, 3) keypoints, the seam differences and the (P, T, 22, 3, 3) bone rotations (the held
+        people's, computed once, while only the cameras move)."""
+        if self.held_people is not None:
+            return self.held_people
         pose6d, seam = self.pose6d()
         rest = self.body.rest_skeleton(self.phenotypes())
         rotmats = self.bone_rotmats(pose6d)
@@ -167,7 +193,8 @@ class _Problem:
 
     def reprojection(self, keypoints: Tensor) -> tuple[Tensor, Tensor]:
         """(V, P, T, 23) squared pixel residuals and the weights (confidence, 0 behind a camera)."""
-        pixels, _, in_front = self.rig.project(keypoints.reshape(-1, 3))
+        rig = self.fixed_rig if self.fixed_rig is not None else self.cameras.tensors()
+        pixels, _, in_front = rig.project(keypoints.reshape(-1, 3))
         pixels = pixels.reshape(-1, self.P, self.T, keypoints.shape[2], 2)
         r2 = ((pixels - self.keypoints_px) ** 2).sum(-1)
         weights = self.confidence * in_front.reshape(r2.shape).to(self.confidence.dtype)
@@ -196,6 +223,12 @@ class _Problem:
             out["seam"] = _mean_square(seam) if seam is not None else keypoints.new_zeros(())
         else:
             out["rest"] = _mean_square(self.pose_params - self.identity6d)
+        if c.weight_interpenetration > 0 and self.P > 1:
+            out["interpenetration"] = interpenetration(keypoints, self.present) / c.contact_scale_m**2
+        if self.cameras.moves and data == "2d":
+            cams = self.cameras
+            out["camera_prior"] = _mean_square(cams.log_focal) + _mean_square(cams.rotvec) + \
+                _mean_square((cams.centre_m - self.centre0_m) / c.camera_prior_scale_m)
         return out
 
     def total(self, terms: dict[str, Tensor]) -> Tensor:
@@ -205,13 +238,16 @@ class _Problem:
             local_linear = 0.0  # a per-frame prior is the baseline without dynamics: no smoothness of its latents
         weights = {"data_3d": 1.0, "reprojection": 1.0, "root_smooth": c.weight_root_smooth, "shape": c.weight_shape,
                    "latent": c.weight_latent, "local_linear": local_linear, "seam": c.weight_seam,
-                   "rest": c.weight_rest}
+                   "rest": c.weight_rest, "interpenetration": c.weight_interpenetration,
+                   "camera_prior": c.weight_camera_prior}
         return sum(weights[name] * value for name, value in terms.items())
 
     def stage_variables(self, stage: str) -> list[Tensor]:
         shape = [self.shape_logit] if self.config.fit_shape else []
         if stage == "global":
             return [self.root6d, self.translation]
+        if stage == "cameras":
+            return self.cameras.variables()
         return [*shape, self.root6d, self.translation, self.pose_params]
 
 
@@ -221,6 +257,18 @@ def _run_stage(problem: _Problem, stage: str, iterations: int,
     last terms, unweighted (and ``total``, weighted)."""
     data = "3d" if stage == "fit3d" else "2d"
     variables = problem.stage_variables(stage)
+    if stage == "cameras":  # the people are held: their keypoints once, not at every evaluation
+        with torch.no_grad():
+            problem.held_people = problem.keypoints()
+        try:
+            return _optimize(problem, stage, data, variables, iterations, progress)
+        finally:
+            problem.held_people = None
+    return _optimize(problem, stage, data, variables, iterations, progress)
+
+
+def _optimize(problem: _Problem, stage: str, data: str, variables: list[Tensor], iterations: int,
+              progress: Callable[[str, int, float], None] | None) -> dict[str, float]:
     if iterations == 0:
         with torch.no_grad():
             return {k: float(v) for k, v in problem.terms(data).items()}
@@ -305,12 +353,22 @@ def fit_bodies(
     problem.encode_pose()  # prior fits: the body pose is the latent motion, from the encoding of the reference pose
     seconds["prepare"] = time.perf_counter() - start
     terms: dict[str, float] = {}
-    for stage, iterations in zip(STAGES, (config.iterations_3d, config.iterations_global, config.iterations_body)):
+    for stage in STAGES:
+        seconds[stage] = 0.0
+    for stage, iterations in _schedule(config, problem.cameras.moves):
         stage_start = time.perf_counter()
         terms = _run_stage(problem, stage, iterations, progress)
-        seconds[stage] = time.perf_counter() - stage_start
+        seconds[stage] += time.perf_counter() - stage_start
         log.info("body fit, %s: %s in %.1f s", stage, ", ".join(f"{k} {v:.4g}" for k, v in terms.items()),
-                 seconds[stage])
+                 time.perf_counter() - stage_start)
+    stage_start = time.perf_counter()
+    fit_warnings = list(warnings)
+    if problem.cameras.moves:
+        floor = _level_floor(problem)
+        if floor is None:
+            fit_warnings.append("fewer than 5 standing person-frames: the floor was not re-levelled after the "
+                                "camera refinement (it stays where the calibration put it)")
+    seconds["floor"] = time.perf_counter() - stage_start
     with torch.no_grad():
         keypoints, _, rotmats = problem.keypoints()
         r2, weights = problem.reprojection(keypoints)
@@ -324,4 +382,37 @@ def fit_bodies(
         present=observations.present.copy(), phenotypes=as_np(phenotypes), bone_rotmats_local=as_np(rotmats),
         root_translation_m=as_np(problem.translation), keypoints_world_m=as_np(keypoints), fps=float(fps))
     latents = as_np(problem.pose_params) if problem.latent else None
-    return BodyFitResult(motions, latents, seconds, terms, reprojection_px, tuple(warnings))
+    cameras = problem.cameras.to_rig() if problem.cameras.moves else rig
+    return BodyFitResult(motions, cameras, latents, seconds, terms, reprojection_px,
+                         tuple(fit_warnings))
+
+
+def _schedule(config: BodyFitConfig, cameras_move: bool) -> list[tuple[str, int]]:
+    """The stages in order with their iterations (module docstring)."""
+    rounds = [("global", config.iterations_global), ("body", config.iterations_body)]
+    if not cameras_move:
+        return [("fit3d", config.iterations_3d), *rounds]
+    return [("fit3d", config.iterations_3d)] + [("cameras", config.iterations_cameras), *rounds] * config.rounds
+
+
+MIN_STANDING_FRAMES = 5
+"""Standing person-frames needed to re-level the floor after a camera refinement."""
+
+
+def _level_floor(problem: _Problem) -> float | None:
+    """Shift the world vertically so that the floor is at z = 0 again: the median lowest sole point over the
+    standing person-frames (the calibration's rule, ``humancal.calibration.floor``). Returns the shift, metres
+    (None: too few standing person-frames; nothing moved)."""
+    with torch.no_grad():
+        keypoints, _, _ = problem.keypoints()
+        present = problem.present
+        joints = keypoints[present].detach().cpu().double().numpy()  # (D, 23, 3)
+        standing = standing_score(joints) >= 0.5
+        if standing.sum() < MIN_STANDING_FRAMES:
+            return None
+        floor_z = float(np.median(joints[standing][:, list(FOOT_JOINTS), 2].min(axis=1)))
+        offset = torch.tensor([0.0, 0.0, floor_z], dtype=problem.translation.dtype,
+                              device=problem.translation.device)
+        problem.translation -= offset
+        problem.cameras.shift_world(offset)
+        return floor_z

@@ -19,8 +19,10 @@ from tests.pipelines.test_calibration_assets import SCENE, _stand_in_table
 
 PARTITION = "synthetic__calib"
 ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people", "gt_motions",
-          "gt_camera_triangulation", "associations", "skeletons3d", "fitted_motions", "metric_tables"]
-FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10}
+          "gt_camera_triangulation", "associations", "skeletons3d", "fitted_motions", "refined_cameras", "metric_tables",
+          "method_tables"]
+FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10, "iterations_cameras": 5}
+METHODS = ["separate", "no_prior"]
 """A shorter fit than the default (the test checks the wiring and sane figures; ``tests/humancal/fitting`` and
 ``scripts/body_sweep.py`` measure the fit itself)."""
 
@@ -47,7 +49,8 @@ def materialized(tmp_path_factory, body_model):
         result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
                                 selection=dg.AssetSelection.assets(*ASSETS), partition_key=PARTITION,
                                 instance=instance, run_config={"ops": {
-                                    "fitted_motions": {"config": FIT}, "metric_tables": {"config": FIT}}})
+                                    "body_fit": {"config": FIT}, "metric_tables": {"config": FIT},
+                                    "method_tables": {"config": {**FIT, "methods": METHODS}}}})
     return result, storage, scene, defs
 
 
@@ -104,6 +107,7 @@ def test_fitted_motions_and_body_metric_rows(materialized):
     graph = defs.resolve_asset_graph()
     parents = {k.to_user_string() for k in graph.get(dg.AssetKey("fitted_motions")).parent_keys}
     assert parents == {"detections", "associations", "skeletons3d", "extrinsics"}  # never ground truth
+    assert graph.get(dg.AssetKey("refined_cameras")).parent_keys == graph.get(dg.AssetKey("fitted_motions")).parent_keys
     motions = _read(storage, "fitted_motions")
     assert list(motions.columns) == SCHEMAS["motions"].names
     assert motions["person_id"].nunique() == SCENE["num_people"]
@@ -114,18 +118,29 @@ def test_fitted_motions_and_body_metric_rows(materialized):
     assert meta["reprojection"].value.startswith("![fitted meshes reprojected") and "base64," in meta["scene"].value
     assert meta["reprojection_error_px"].value < 15
     metrics = _read(storage, "metric_tables")
-    expected = {"mpjpe_mm", "pa_mpjpe_mm", "pcp_avg", "accel_error_mm_s2", "pve_mm", "reprojection_error_px",
+    methods = _read(storage, "method_tables")
+    assert set(methods["method"]) == set(METHODS)
+    both = pd.concat([metrics, methods], ignore_index=True)
+    both = both[both["view"].isna()]
+    expected = {"mpjpe_mm", "pa_mpjpe_mm", "pcp_avg", "accel_error_mm_s2", "pve_mm", "fit_reprojection_error_px",
                 "seconds"}
-    for method in ("fit_init_cameras", "fit_gt_cameras", "fit_per_frame_prior", "fit_no_prior"):
-        rows = metrics[metrics["method"] == method].set_index("metric")["value"]
-        assert expected <= set(rows.index), (method, sorted(rows.index))
+    cameras = {"focal_error_pct", "position_error_mm", "angle_error_deg", "reprojection_error_px"}
+    for method in ("int_ext", *METHODS):
+        rows = both[both["method"] == method].set_index("metric")["value"]
+        assert expected | cameras <= set(rows.index), (method, sorted(rows.index))
         assert rows["mpjpe_mm"] < 60 and rows["pve_mm"] < 120 and rows["pcp_avg"] > 80, (method, rows.to_dict())
+    # the extrinsics here are the true cameras: the refinement keeps them close (few pixels of detector noise)
+    refined = both[both["method"] == "int_ext"].set_index("metric")["value"]
+    assert refined["focal_error_pct"] < 2 and refined["angle_error_deg"] < 0.5, refined.to_dict()
+    meta = {e.materialization.asset_key.to_user_string(): e.materialization.metadata
+            for e in result.get_asset_materialization_events()}["refined_cameras"]
+    assert meta["regime"].value == "int_ext" and meta["focal_change_pct"].value < 2
     for method in ("skeletons3d", "skeletons3d_gt_cameras"):
         rows = metrics[metrics["method"] == method].set_index("metric")["value"]
         assert {"mpjpe_mm", "pa_mpjpe_mm", "accel_error_mm_s2"} <= set(rows.index)
     # the dynamics prior is smoother than raw joint angles fitted with no prior
-    accel = metrics[metrics["metric"] == "accel_error_mm_s2"].set_index("method")["value"]
-    assert accel["fit_init_cameras"] < accel["fit_no_prior"]
+    accel = both[both["metric"] == "accel_error_mm_s2"].set_index("method")["value"]
+    assert accel["int_ext"] < accel["no_prior"]
 
 
 def test_identity_metrics_count_pairs_switches_and_rejections():

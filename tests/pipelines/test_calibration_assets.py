@@ -19,7 +19,7 @@ from resources.io_managers import partition_path
 
 PARTITION = "synthetic__calib"
 SCENE = {"preset": "demo", "seed": 11, "num_people": 3, "num_views": 4, "num_frames": 60}
-QUICK_FIT = {"iterations_3d": 40, "iterations_global": 2, "iterations_body": 3}
+QUICK_FIT = {"iterations_3d": 40, "iterations_global": 2, "iterations_body": 3, "iterations_cameras": 2}
 """The body fits of the graph, cut short: these tests are about the calibration (``test_association_assets`` and
 ``tests/humancal/fitting`` check the fits)."""
 
@@ -52,12 +52,13 @@ def materialized(tmp_path_factory, body_model):
     pq.write_table(to_arrow(table, "lifted_detections"), str(path))
     graph = defs.resolve_asset_graph()
     keys = [k for k in graph.materializable_asset_keys
-            if graph.get(k).partitions_def == SEQUENCES and k != dg.AssetKey("detections")]
+            if graph.get(k).partitions_def == SEQUENCES and k != dg.AssetKey("detections")
+            and k != dg.AssetKey("method_tables")]  # on request: several full fits (test_association_assets)
     with dg.instance_for_test(temp_dir=str(tmp_path_factory.mktemp("home"))) as instance:
         instance.add_dynamic_partitions(SEQUENCES.name, [PARTITION])
         result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
                                 selection=dg.AssetSelection.assets(*keys), partition_key=PARTITION, instance=instance,
-                                run_config={"ops": {"fitted_motions": {"config": QUICK_FIT},
+                                run_config={"ops": {"body_fit": {"config": QUICK_FIT},
                                                     "metric_tables": {"config": QUICK_FIT}}})
     return result, storage
 

@@ -35,6 +35,8 @@ def test_update_on_the_real_graph(tmp_path):
     names = {name for name, _ in first.materialized}
     assert {"lifter_checkpoint", "raw_detections", "detections", "intrinsics", "extrinsics", "metric_tables"} <= names
     assert "lifter_trained" not in names and first.failed == ()
+    # the fan-in summaries follow once every registered partition (here the one) is up to date
+    assert {"benchmark_table", "stage_timings"} <= names
     assert run().count == 0
 
     partition_path(storage, "extrinsics", PARTITION).unlink()

@@ -10,7 +10,7 @@ from humancal.fitting import BodyFitConfig, FittingInputError, body_observations
 from humancal.prior import shipped_prior
 from humancal.synthetic import generate_scene, preset
 
-FAST = BodyFitConfig(iterations_3d=150, iterations_global=5, iterations_body=15)
+FAST = BodyFitConfig(iterations_3d=150, iterations_global=5, iterations_body=15, cameras="fixed")
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,9 @@ def test_prior_fit_recovers_the_people_and_is_smoother_than_raw_angles(body_mode
     assert mpjpe < 30.0, mpjpe
     assert fit.reprojection_error_px < 10.0
     assert accel < 0.5 * raw_accel, (accel, raw_accel)
-    assert set(fit.stage_seconds) == {"prepare", "fit3d", "global", "body", "total"}
+    assert set(fit.stage_seconds) == {"prepare", "fit3d", "cameras", "global", "body", "floor", "total"}
+    assert fit.stage_seconds["cameras"] == 0.0
+    np.testing.assert_array_equal(fit.cameras.K, rig.K)  # held
     assert {"reprojection", "latent", "local_linear", "shape", "root_smooth", "seam", "total"} <= set(fit.loss_terms)
     assert fit.latents is not None and fit.latents.shape[-1] == 32 and raw.latents is None
     assert np.all((fit.motions.phenotypes >= 0) & (fit.motions.phenotypes <= 1))

@@ -1,0 +1,102 @@
+"""Unpartitioned benchmark assets (group ``benchmark_summary``): every sequence's figures beside the paper's, and the
+per-stage timing table.
+
+``benchmark_table`` reads the stored ``metric_tables`` and ``method_tables`` of every registered partition that
+has them materialized (partitions without are skipped with a log line naming them; ``method_tables`` may be missing
+from the definitions altogether), adds the paper's numbers and the peer figures measured here
+(``evaluation/paper_results.py``) and stores the long table (canonical table ``benchmark``) with its side-by-side
+markdown as metadata (``evaluation/benchmark.py``).
+
+It depends on the per-sequence tables it reads (those among the definitions and not computed on request only), so
+``humancal update`` computes it once every registered partition of them is up to date and never from a partial set;
+``dagster asset materialize --select benchmark_table`` computes it from whatever is stored.
+"""
+
+
+import hashlib
+from collections.abc import Callable, Iterable, Sequence
+
+import dagster as dg
+import pandas as pd
+from upath import UPath
+
+from assets.common import ON_REQUEST_KEY, UPDATE_CONDITION, table_metadata, table_output
+from assets.partitions import SEQUENCES
+from assets.timings import GROUP, build_stage_timings_asset
+from evaluation.benchmark import benchmark_markdown, benchmark_table, normalise_metrics
+from evaluation.paper_results import PAPER_FILE, PEER_FILE, paper_results, peer_results
+from resources.io_managers import partition_path
+
+__all__ = ["BENCHMARK_INPUTS", "build_benchmark_assets", "read_partition_tables"]
+
+BENCHMARK_INPUTS = ("metric_tables", "method_tables")
+"""The per-sequence ``metrics`` tables the benchmark reads, in this order (a figure in both keeps the later)."""
+
+_DATA_DIGEST = hashlib.sha256(PAPER_FILE.read_bytes() + PEER_FILE.read_bytes()).hexdigest()[:8]
+CODE_VERSION = f"1-data-{_DATA_DIGEST}"
+"""The code version names the digest of the paper's and the peers' data files: editing them makes it stale."""
+
+
+def read_partition_tables(storage_root: str | UPath, asset: str, partitions: Iterable[str],
+                          log: Callable[[str], None] = lambda message: None) -> tuple[list[pd.DataFrame], list[str]]:
+    """The stored ``metrics`` tables of ``asset`` for ``partitions`` (older ones brought to today's columns) and
+    the partitions read; a partition without a stored file is skipped with a log line."""
+    tables, read, missing = [], [], []
+    for partition in partitions:
+        path = partition_path(storage_root, asset, partition)
+        if not path.exists():
+            missing.append(partition)
+            continue
+        tables.append(normalise_metrics(pd.read_parquet(str(path))))
+        read.append(partition)
+    if missing:
+        log(f"{asset}: no stored table for {', '.join(missing)}: skipped")
+    return tables, read
+
+
+def build_benchmark_assets(storage_root: str, sequence_assets: Sequence[dg.AssetsDefinition]) -> list[dg.AssetsDefinition]:
+    """``benchmark_table`` and ``stage_timings`` over the per-sequence assets ``sequence_assets``.
+
+    Args:
+        storage_root: the artifacts root of the Parquet IO manager (where the per-sequence tables are stored).
+        sequence_assets: the per-sequence assets of the definitions: which of :data:`BENCHMARK_INPUTS` exist, and
+            what ``stage_timings`` times.
+    """
+    specs = [spec for assets_def in sequence_assets for spec in assets_def.specs]
+    by_name = {spec.key.to_user_string(): spec for spec in specs}
+    inputs = [name for name in BENCHMARK_INPUTS if name in by_name]
+    # An input computed on request only would make the update wait for it forever: read, not depended on.
+    deps = [name for name in inputs if not (by_name[name].metadata or {}).get(ON_REQUEST_KEY)]
+
+    @dg.asset(name="benchmark_table", group_name=GROUP, deps=deps, metadata=table_metadata("benchmark"),
+              code_version=CODE_VERSION, automation_condition=UPDATE_CONDITION)
+    def benchmark_table_asset(context: dg.AssetExecutionContext) -> dg.Output:
+        """Every sequence's headline figures (``metric_tables`` and ``method_tables`` of every partition that has
+        them) beside the paper's numbers and the peers measured here, as one long table; the side-by-side markdown
+        is in the metadata (``evaluation/benchmark.py``)."""
+        registered = sorted(context.instance.get_dynamic_partitions(SEQUENCES.name))
+        tables, read = [], {}
+        for name in BENCHMARK_INPUTS:
+            if name not in inputs:
+                context.log.info(f"{name}: not among the definitions' assets: skipped")
+                continue
+            materialized = context.instance.get_materialized_partitions(dg.AssetKey(name))
+            partitions = [p for p in registered if p in materialized]
+            left = [p for p in registered if p not in materialized]
+            if left:
+                context.log.info(f"{name}: not materialized for {', '.join(left)}: skipped")
+            found, read[name] = read_partition_tables(storage_root, name, partitions, context.log.warning)
+            tables += found
+        metrics = pd.concat(tables, ignore_index=True) if tables else normalise_metrics(pd.DataFrame(
+            columns=["dataset", "sequence", "method", "metric", "value", "unit"]))
+        paper = paper_results()
+        table = benchmark_table(metrics, paper, peer_results())
+        markdown = benchmark_markdown(table)
+        context.log.info(f"benchmark: {len(table)} rows from {len(tables)} stored tables")
+        return table_output(
+            table, "benchmark", rows=len(table),
+            partitions=dg.MetadataValue.md("\n".join(f"- {name}: {', '.join(parts) or 'none'}"
+                                                     for name, parts in read.items()) or "none"),
+            summary=dg.MetadataValue.md(markdown))
+
+    return [benchmark_table_asset, build_stage_timings_asset(specs)]

@@ -1,0 +1,81 @@
+"""Per sequence, on request: the other regimes of the paper's Tables fitted on the pipeline's detections and
+association (``evaluation.method_comparison``), for the benchmark table. Several full fits: ``humancal update``
+leaves it alone; ``humancal benchmark`` computes it."""
+
+import dagster as dg
+import pandas as pd
+
+from assets.bodies import fitting_prior
+from assets.checks import latest_check_outcomes
+from assets.common import ON_REQUEST_KEY, table_metadata, table_output
+from assets.partitions import SEQUENCES
+from assets.settings import BodyFitSettings
+from evaluation.method_comparison import METHODS, method_metric_table
+from humancal.camera import cameras_from_table
+from humancal.inputs import sequence_fps
+from humancal.lifter import lifted_from_table
+from humancal.prior.weights import PriorWeightsError
+from humancal.tables import empty_table
+from resources.body_model import BodyModelResource
+from resources.datasets import DatasetsResource
+from resources.torch import TorchResource
+
+DEFAULT_METHODS = [m for m in METHODS if m != "int_ext"]
+"""Every regime but the pipeline's own (``int_ext``, already in ``metric_tables``)."""
+
+
+class MethodTableSettings(BodyFitSettings):
+    """The body fit's settings (the same as ``fitted_motions``'s: give both the same run config) and the methods."""
+
+    methods: list[str] = DEFAULT_METHODS
+
+    def to_library(self):
+        return BodyFitSettings(**self.model_dump(exclude={"methods"})).to_library()
+
+
+def _prior_or_none(variant: str):
+    try:
+        return fitting_prior(variant)
+    except PriorWeightsError:
+        return None
+
+
+@dg.asset(
+    partitions_def=SEQUENCES,
+    group_name="benchmark",
+    metadata={**table_metadata("metrics"), ON_REQUEST_KEY: "humancal benchmark"},
+    code_version="1",
+    description="The paper's regimes (ext, gt_cameras, init, separate, per_frame_prior, no_prior and the prior "
+                "ablations whose weights exist) fitted and scored on one sequence.",
+)
+def method_tables(context: dg.AssetExecutionContext, config: MethodTableSettings, datasets: DatasetsResource,
+                  body_model: BodyModelResource, torch_runtime: TorchResource, raw_detections: pd.DataFrame,
+                  detections: pd.DataFrame, extrinsics: pd.DataFrame, gt_cameras: pd.DataFrame,
+                  gt_poses3d: pd.DataFrame, gt_associations: pd.DataFrame, associations: pd.DataFrame,
+                  skeletons3d: pd.DataFrame, gt_motions: pd.DataFrame) -> dg.Output:
+    """Fit every method of ``config.methods`` (``evaluation.method_comparison.METHODS``) and score it."""
+    unknown = sorted(set(config.methods) - set(METHODS))
+    if unknown:
+        raise dg.Failure(f"method_tables: unknown method(s) {unknown}; known: {list(METHODS)}")
+    spec = datasets.spec(context.partition_key)
+    gt = cameras_from_table(gt_cameras)
+    if not gt or len(gt_associations) == 0 or len(gt_poses3d) == 0:
+        context.log.info(f"{spec.key}: no known cameras, identities or 3D poses: no method rows")
+        return table_output(empty_table("metrics"), "metrics", rows=0)
+    outcomes = latest_check_outcomes(context.instance, dg.AssetKey("extrinsics"), context.partition_key)
+    failed = ",".join(sorted(o.check for o in outcomes if not o.passed)) if outcomes else "unchecked"
+    dense, lifted = lifted_from_table(detections)
+    with torch_runtime.applied():
+        table = method_metric_table(
+            spec, methods=list(config.methods), priors=_prior_or_none, body=body_model.get(),
+            config=config.to_library(), fps=sequence_fps(spec)[0], dense=dense, lifted=lifted,
+            detections=raw_detections, associations=associations, skeletons3d=skeletons3d,
+            cameras=cameras_from_table(extrinsics), gt_associations=gt_associations, gt_poses3d=gt_poses3d,
+            gt_cameras=gt, gt_motions=gt_motions, failed_checks=failed, log=context.log.info)
+    if table.empty:
+        table = empty_table("metrics")
+    headline = table[table["view"].isna()].drop(columns="view")
+    return table_output(table, "metrics", rows=len(table), methods=", ".join(sorted(set(table["method"]))),
+                        summary=dg.MetadataValue.md(headline.pivot_table(
+                            index="method", columns="metric", values="value", aggfunc="first").to_markdown(
+                            floatfmt=".2f")) if len(headline) else "no rows")

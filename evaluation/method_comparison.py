@@ -1,0 +1,146 @@
+"""The paper's regimes side by side on one sequence: the same detections and association, the cameras and the prior
+changed one at a time (the rows of the paper's Tables; ``docs/refinement.md``).
+
+Methods (metric-table names; "init" cameras are the pipeline's self-calibrated ``extrinsics``):
+
+=================== ======================================================== =========================== ============
+method              cameras                                                  refined in the fit          prior
+=================== ======================================================== =========================== ============
+``int_ext``         init                                                     focal + extrinsics          motion prior
+``ext``             init extrinsics with the true intrinsics (focal known)   extrinsics                  motion prior
+``gt_cameras``      true (association redone with them)                      no                          motion prior
+``init``            init                                                     no                          motion prior
+``separate``        init, bundle-adjusted on the triangulated joints first   no                          motion prior
+``per_frame_prior`` init                                                     focal + extrinsics          per-frame
+``no_prior``        init                                                     focal + extrinsics          none
+``no_local_linear`` / ``basic_gru`` / ``no_skip``: as ``int_ext`` with the prior variant trained without the
+local-linear term / with one-directional GRUs / without the skip connection (only where their weights exist).
+=================== ======================================================== =========================== ============
+
+Every method gets the body rows of :func:`evaluation.body_metrics.body_metric_rows`, its fitted keypoints'
+reprojection error named ``fit_reprojection_error_px`` (``reprojection_error_px`` is the camera row's name).
+Methods whose cameras differ from both the pipeline's init (whose camera rows are the metric table's ``init``
+rows) and the truth get the camera rows of :func:`evaluation.camera_metrics.camera_metrics` too
+(``focal_error_pct``, ``position_error_mm``, ``angle_error_deg``, ``reprojection_error_px``: the definitions of
+the ``init`` rows, computed for the cameras the method ended with).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import pandas as pd
+
+from evaluation.body_metrics import body_metric_rows
+from evaluation.camera_metrics import camera_metrics
+from evaluation.protocols import MetricRow, metrics_table
+from humancal.association import associate, to_associations_table, to_skeletons_table
+from humancal.body import BodyModel
+from humancal.camera import Camera, CameraRig
+from humancal.fitting import BodyFitConfig, body_observations, bundle_adjust, fit_bodies
+from humancal.detections import DenseDetections
+from humancal.lifter import LiftedPoses
+from humancal.prior import MotionVAE
+from humancal.sequences import SequenceSpec
+
+__all__ = ["METHODS", "Method", "camera_and_body_rows", "method_metric_table"]
+
+
+@dataclass(frozen=True)
+class Method:
+    """One regime: where the cameras start (``init``, ``gt``, ``gt_intrinsics``, ``bundle``), which of their
+    parameters the fit moves (``fixed``, ``ext``, ``int_ext``) and the prior variant (None: no prior)."""
+
+    cameras: str
+    regime: str
+    prior: str | None = "motion_prior"
+
+
+METHODS: dict[str, Method] = {
+    "int_ext": Method("init", "int_ext"),
+    "ext": Method("gt_intrinsics", "ext"),
+    "gt_cameras": Method("gt", "fixed"),
+    "init": Method("init", "fixed"),
+    "separate": Method("bundle", "fixed"),
+    "per_frame_prior": Method("init", "int_ext", "per_frame"),
+    "no_prior": Method("init", "int_ext", None),
+    "no_local_linear": Method("init", "int_ext", "no_local_linear"),
+    "basic_gru": Method("init", "int_ext", "unidirectional"),
+    "no_skip": Method("init", "int_ext", "no_skip"),
+}
+"""Every method of the module docstring."""
+
+
+def _with_true_intrinsics(cameras: list[Camera], gt_cameras: list[Camera]) -> list[Camera]:
+    return [Camera(g.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, g.distortion)
+            for c, g in zip(cameras, gt_cameras)]
+
+
+def camera_and_body_rows(spec: SequenceSpec, *, motions: pd.DataFrame, cameras: list[Camera], seconds: float,
+                         associations: pd.DataFrame, detections: pd.DataFrame, gt_associations: pd.DataFrame,
+                         gt_poses3d: pd.DataFrame, gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
+                         body: BodyModel, fps: float, with_cameras: bool) -> list[MetricRow]:
+    """The body rows of one fit (its reprojection error named ``fit_reprojection_error_px``) and, with
+    ``with_cameras``, the camera rows of the cameras it ended with."""
+    rows = body_metric_rows(spec, motions=motions, fps=fps, seconds=seconds, associations=associations,
+                            detections=detections, cameras=cameras, gt_associations=gt_associations,
+                            gt_poses3d=gt_poses3d, gt_cameras=gt_cameras, gt_motions=gt_motions, body=body)
+    rows = [MetricRow("fit_" + r.metric, r.value, r.unit, view=r.view) if r.metric.startswith("reprojection")
+            else r for r in rows]
+    return camera_metrics(cameras, gt_cameras, detections, gt_associations) + rows if with_cameras else rows
+
+
+def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Callable[[str], MotionVAE | None],
+                        body: BodyModel, config: BodyFitConfig, fps: float, dense: DenseDetections,
+                        lifted: LiftedPoses, detections: pd.DataFrame, associations: pd.DataFrame, skeletons3d: pd.DataFrame,
+                        cameras: list[Camera], gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
+                        gt_cameras: list[Camera], gt_motions: pd.DataFrame | None, failed_checks: str | None = None,
+                        log: Callable[[str], None] | None = None) -> pd.DataFrame:
+    """Fit and score each of ``methods`` (keys of :data:`METHODS`) on one sequence.
+
+    Args:
+        methods: which methods; a prior variant whose weights ``priors`` cannot give (returns None for a variant
+            other than None) is skipped with a log line.
+        priors: the prior of a variant name.
+        config: the pipeline's fit settings; each method changes only ``cameras``.
+        dense, lifted: the detections and their lifted poses (``humancal.lifter.lifted_from_table`` of the
+            ``detections`` asset), for the fits and the association with the true cameras.
+        detections: the 2D detections; associations, skeletons3d: the pipeline's association (init cameras).
+        cameras: the init cameras; failed_checks: the checks they failed (carried on rows that start from them).
+    """
+    say = log or (lambda message: None)
+    gt_association: tuple[pd.DataFrame, pd.DataFrame] | None = None
+    parts = []
+    for name in methods:
+        method = METHODS[name]
+        prior = priors(method.prior) if method.prior is not None else None
+        if method.prior is not None and prior is None:
+            say(f"{name}: no weights for the prior variant {method.prior!r}: skipped (train it with "
+                f"`humancal train prior --variant {method.prior}`)")
+            continue
+        start = time.perf_counter()
+        people, skeletons, used, failed = associations, skeletons3d, cameras, failed_checks
+        if method.cameras == "gt":
+            if gt_association is None:
+                result = associate(dense, lifted, CameraRig.from_cameras(gt_cameras))
+                gt_association = (to_associations_table(result, spec.sequence),
+                                  to_skeletons_table(result, spec.sequence))
+            (people, skeletons), used, failed = gt_association, gt_cameras, None
+        elif method.cameras == "gt_intrinsics":
+            used = _with_true_intrinsics(cameras, gt_cameras)
+        observations, _ = body_observations(dense, people, skeletons, len(used))
+        rig = CameraRig.from_cameras(used)
+        if method.cameras == "bundle":
+            rig = bundle_adjust(observations, rig, config, regime="int_ext").cameras
+        fit = fit_bodies(body, observations, rig, prior, config.replace(cameras=method.regime), fps=fps)
+        seconds = time.perf_counter() - start
+        say(f"{name}: {seconds:.1f} s")
+        rows = camera_and_body_rows(
+            spec, motions=fit.motions.to_table(spec.sequence), cameras=fit.cameras.to_cameras(), seconds=seconds,
+            associations=people, detections=detections, gt_associations=gt_associations, gt_poses3d=gt_poses3d,
+            gt_cameras=gt_cameras, gt_motions=gt_motions, body=body, fps=fps,
+            with_cameras=method.cameras in ("gt_intrinsics", "bundle") or method.regime != "fixed")
+        parts.append(metrics_table(spec.dataset, spec.sequence, name, rows, failed))
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()

@@ -1,0 +1,115 @@
+"""Cold timing of the per-sequence graph, from the detections to the metric tables, on one partition.
+
+    python scripts/bench_graph.py [--partition synthetic__benchmark] [--with-method-tables] [--keep DIR]
+
+In a fresh temporary state dir (no stored artifact, no run history; only anny's body-model cache,
+``ANNY_CACHE_DIR``, is reused), in-process: materializes ``lifter_checkpoint`` (the shipped weights), then, in one
+run, every per-sequence asset that ``metric_tables`` needs for the partition, with their asset checks, as
+``dagster asset materialize --select ... --partition P`` would (``humancal update`` runs the same steps level by
+level, one run per level). It then prints each asset's seconds from the run's step stats (the function of the
+``stage_timings`` asset), the total from ``detections`` to ``metric_tables`` (the method's path: neither the
+inputs and ground truth nor the references computed from them), and the wall time of the run.
+
+The performance target (``shared/DESIGN.md`` section 7) is the reference workload, ``synthetic__benchmark``
+(900 frames, 5 views, 4 people: the default); ``synthetic__demo`` is the same scene size over 300 frames. Restrict
+the process to two cores to measure against the 2-core target: ``taskset -c 0,1 python scripts/bench_graph.py``.
+torch uses the threads of the ``torch_runtime`` resource (1 by default).
+"""
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+QUIET = {"loggers": {"console": {"config": {"log_level": "WARNING"}}}}
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--partition", default="synthetic__benchmark", help="the partition to time")
+    parser.add_argument("--with-method-tables", action="store_true",
+                        help="also time method_tables (the paper's other regimes: several full fits), in a second run")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="keep the state dir here (artifacts and the instance) instead of a temporary one")
+    return parser.parse_args(argv)
+
+
+def main(argv=None) -> int:
+    args = _parse(argv)
+    os.environ.setdefault("ANNY_CACHE_DIR", str(REPO / ".humancal" / "cache" / "anny"))
+    state = args.keep or Path(tempfile.mkdtemp(prefix="humancal-bench-graph-"))
+    state.mkdir(parents=True, exist_ok=True)
+    os.environ["HUMANCAL_STATE_DIR"] = str(state)
+    os.environ["DAGSTER_HOME"] = str(state / "dagster_home")
+    (state / "dagster_home").mkdir(exist_ok=True)
+    (state / "dagster_home" / "dagster.yaml").write_text("telemetry:\n  enabled: false\n")
+    sys.path.insert(0, str(REPO))
+    try:
+        return _run(args, state)
+    finally:
+        if args.keep is None:
+            shutil.rmtree(state, ignore_errors=True)
+
+
+def _run(args, state: Path) -> int:
+    import dagster as dg
+
+    from assets.timings import stage_timings_table, timed_graph
+    from evaluation.benchmark import stage_timings_markdown
+    from evaluation.paper_results import paper_results
+    from pipelines.definitions import build_definitions
+    from pipelines.partitions import SEQUENCES
+
+    defs = build_definitions(str(state / "artifacts"))
+    if args.partition not in {spec.key for spec in defs.resources["datasets"].available()}:
+        raise SystemExit(f"bench_graph: unknown or unavailable partition {args.partition}")
+    instance = dg.DagsterInstance.get()
+    instance.add_dynamic_partitions(SEQUENCES.name, [args.partition])
+    graph = defs.resolve_asset_graph()
+    checks = list(getattr(defs, "asset_checks", None) or [])
+
+    def materialize(keys, partition=None):
+        start = time.perf_counter()
+        result = dg.materialize([*defs.assets, *checks], resources=defs.resources, instance=instance,
+                                selection=dg.AssetSelection.assets(*keys), partition_key=partition,
+                                run_config=QUIET, raise_on_error=False)
+        seconds = time.perf_counter() - start
+        if not result.success:
+            failed = [e.step_key for e in result.get_step_failure_events()]
+            raise SystemExit(f"bench_graph: the run failed (steps {failed}); see the log above")
+        return seconds
+
+    needed, todo = set(), [dg.AssetKey("metric_tables")]
+    while todo:  # metric_tables and everything upstream of it
+        key = todo.pop()
+        if key not in needed:
+            needed.add(key)
+            todo.extend(graph.get(key).parent_keys)
+    shared = sorted((k for k in needed if graph.get(k).partitions_def is None), key=lambda k: k.to_user_string())
+    partitioned = sorted((k for k in needed if graph.get(k).partitions_def is not None), key=lambda k: k.to_user_string())
+    print(f"{args.partition}: fresh state dir {state}; {os.cpu_count()} CPU(s) visible, "
+          f"{len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else '?'} usable", flush=True)
+    print(f"shared inputs first: {', '.join(k.to_user_string() for k in shared)} ...", flush=True)
+    shared_s = materialize(shared)
+    print(f"  {shared_s:.1f} s", flush=True)
+    print(f"then {len(partitioned)} per-sequence assets in one run ...", flush=True)
+    wall = materialize(partitioned, args.partition)
+    if args.with_method_tables:
+        print("then method_tables ...", flush=True)
+        wall_methods = materialize([dg.AssetKey("method_tables")], args.partition)
+    timings = stage_timings_table(instance, timed_graph(defs.resolve_all_asset_specs()), [args.partition])
+    print()
+    print(stage_timings_markdown(timings, paper_results()))
+    total = timings.loc[timings["asset"] == "total", "seconds"].item()
+    print(f"{args.partition}: detections -> metric_tables {total:.1f} s (sum of the method's steps); the run's wall "
+          f"time {wall:.1f} s (every step it needed, loading and checks included)"
+          + (f"; method_tables run {wall_methods:.1f} s" if args.with_method_tables else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
