@@ -4,6 +4,7 @@
     humancal update [--partition P ...]  materialize only what is missing or stale
     humancal report [--partition P] [--format md|csv]   (P may also be cmu_mocap__held_out_02_14)
     humancal report --benchmark [--partition P]   ours beside the paper's numbers, and the per-stage seconds
+    humancal benchmark --partition P [--methods M,...]   fit the paper's regimes (method_tables), then report --benchmark
     humancal export detections|cameras --partition P --format F --out PATH
     humancal export motions --partition P --format bvh|gltf|npz|obj --out DIR [--frames A:B[:S]] [--fps F]
     humancal train lifter [--discard]    train the lifter here (replaces the shipped weights), or go back to them
@@ -445,6 +446,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_train)
     from pipelines.capture_cli import add_parser as add_capture_command  # humancal add NAME --openpose ...
     add_capture_command(sub)
+    from pipelines.benchmark_command import add_parser as add_benchmark_command  # humancal benchmark --partition P
+    add_benchmark_command(sub, cmd_update, _instance, QUIET_RUN_CONFIG)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
     p.add_argument("--port", type=int, default=3000)
     p.set_defaults(func=cmd_ui)

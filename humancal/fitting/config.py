@@ -89,7 +89,7 @@ class BodyFitConfig:
     iterations_cameras: int = 50
     weight_camera_prior: float = 1e-4
     camera_prior_scale_m: float = 0.1
-    weight_interpenetration: float = 1.0
+    weight_interpenetration: float = 0.0
     contact_scale_m: float = 0.01
 
     def __post_init__(self) -> None:
