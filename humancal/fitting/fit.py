@@ -223,7 +223,9 @@ class _Problem:
             out["seam"] = _mean_square(seam) if seam is not None else keypoints.new_zeros(())
         else:
             out["rest"] = _mean_square(self.pose_params - self.identity6d)
-        if c.weight_interpenetration > 0 and self.P > 1:
+        if c.weight_interpenetration > 0 and self.P > 1 and data == "2d":
+            # not in the first stage: its people start in the reference pose, arms out, overlapping their
+            # neighbours; pushed apart there, they end beyond the data term's robust range
             out["interpenetration"] = interpenetration(keypoints, self.present) / c.contact_scale_m**2
         if self.cameras.moves and data == "2d":
             cams = self.cameras
