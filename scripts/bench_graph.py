@@ -1,6 +1,6 @@
 """Cold timing of the per-sequence graph, from the detections to the metric tables, on one partition.
 
-    python scripts/bench_graph.py [--partition synthetic__benchmark] [--with-method-tables] [--keep DIR]
+    python scripts/bench_graph.py [--partition synthetic__benchmark] [--threads N] [--with-method-tables] [--keep DIR]
 
 In a fresh temporary state dir (no stored artifact, no run history; only anny's body-model cache,
 ``ANNY_CACHE_DIR``, is reused), in-process: materializes ``lifter_checkpoint`` (the shipped weights), then, in one
@@ -33,6 +33,8 @@ def _parse(argv):
     parser.add_argument("--partition", default="synthetic__benchmark", help="the partition to time")
     parser.add_argument("--with-method-tables", action="store_true",
                         help="also time method_tables (the paper's other regimes: several full fits), in a second run")
+    parser.add_argument("--threads", type=int, default=None,
+                        help="torch intra-op threads (the torch_runtime resource; default: its default, 1)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep the state dir here (artifacts and the instance) instead of a temporary one")
     return parser.parse_args(argv)
@@ -72,11 +74,15 @@ def _run(args, state: Path) -> int:
     graph = defs.resolve_asset_graph()
     checks = list(getattr(defs, "asset_checks", None) or [])
 
+    run_config = dict(QUIET)
+    if args.threads is not None:
+        run_config["resources"] = {"torch_runtime": {"config": {"threads": args.threads}}}
+
     def materialize(keys, partition=None):
         start = time.perf_counter()
         result = dg.materialize([*defs.assets, *checks], resources=defs.resources, instance=instance,
                                 selection=dg.AssetSelection.assets(*keys), partition_key=partition,
-                                run_config=QUIET, raise_on_error=False)
+                                run_config=run_config, raise_on_error=False)
         seconds = time.perf_counter() - start
         if not result.success:
             failed = [e.step_key for e in result.get_step_failure_events()]

@@ -42,6 +42,11 @@ def test_the_variables_start_at_the_rig_and_carry_gradients(scene_inputs):  # no
     assert all(v.grad is not None and torch.isfinite(v.grad).all() for v in cams.variables())
     assert len(CameraVariables(rig, "ext").variables()) == 2  # rotation and centre, focal held
     assert CameraVariables(rig, "fixed").variables() == []
+    with_k1 = CameraVariables(rig, "int_ext", refine_k1=True)
+    assert len(with_k1.variables()) == 4
+    with torch.no_grad():
+        with_k1.k1 += 0.01
+    np.testing.assert_allclose(with_k1.to_rig().distortion[:, 0], rig.distortion[:, 0] + 0.01)
     with pytest.raises(ValueError, match="camera regime 'intrinsics' must be one of"):
         CameraVariables(rig, "intrinsics")
 
