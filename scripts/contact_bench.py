@@ -43,10 +43,8 @@ from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
 from humancal.prior import shipped_prior
 from humancal.synthetic import make_rig, preset, sample_people, simulate_detections
 from humancal.synthetic.activities import activity_track, plan_activities
-from humancal.synthetic.gait import draw_style, gait_channels
-from humancal.synthetic.motions import FOOT_JOINTS, Motions
+from humancal.synthetic.motions import FOOT_JOINTS, Motions, person_pose
 from humancal.synthetic.paths import Paths, simulate_paths
-from humancal.synthetic.poses import arm_geometry, channels_to_rotmats
 
 _FOOT_INDEX = joint_indices(list(FOOT_JOINTS))
 _ANKLE_INDEX = joint_indices(["left_ankle", "right_ankle"])
@@ -70,19 +68,10 @@ def couple_motions(body: BodyModel, rest: RestSkeleton, num_frames: int, fps: fl
     paths = couple_paths(simulate_paths([track], area_size_m, fps, rng, margin_m=0.4 + separation_m), separation_m,
                          fps)
     heads = rest.bone_heads_m.detach().double().cpu().numpy()
-    index = {name: i for i, name in enumerate(body.posed_bones)}
     rotmats = np.empty((2, num_frames, body.num_posed_bones, 3, 3))
     root_xy = np.empty((2, num_frames, 2))
     for p in range(2):
-        hip, knee, ankle = (heads[p, index[b]] for b in ("upperleg01.L", "lowerleg01.L", "foot.L"))
-        leg_length_m = float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee))
-        channels, sway = gait_channels(track, paths, p, leg_length_m, draw_style(rng), fps, rng)
-        heading = paths.heading_rad[p]
-        geometry = arm_geometry(heads[p], body.posed_bones)
-        rotmats[p] = channels_to_rotmats(channels, heading + 0.5 * np.pi, geometry, body.posed_bones)
-        forward = np.stack([np.cos(heading), np.sin(heading)], axis=1)
-        left = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
-        root_xy[p] = paths.position_m[p] + sway[:, :1] * left + sway[:, 1:] * forward
+        rotmats[p], root_xy[p] = person_pose(body, heads[p], track, paths, p, fps, rng)
     rotmats_t = torch.as_tensor(rotmats, dtype=body.dtype)
     translation = np.concatenate([root_xy, np.zeros((2, num_frames, 1))], axis=-1)
 

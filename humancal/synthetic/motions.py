@@ -19,9 +19,9 @@ import torch
 
 from humancal.body import BodyModel, RestSkeleton
 from humancal.keypoints import joint_indices
-from humancal.synthetic.activities import ACTIVITIES, activity_track, plan_activities
+from humancal.synthetic.activities import ACTIVITIES, ActivityTrack, activity_track, plan_activities
 from humancal.synthetic.gait import draw_style, gait_channels
-from humancal.synthetic.paths import seated_paths, simulate_paths
+from humancal.synthetic.paths import Paths, seated_paths, simulate_paths
 from humancal.synthetic.poses import arm_geometry, channels_to_rotmats
 
 __all__ = ["Motions", "generate_motions", "FOOT_JOINTS"]
@@ -74,6 +74,30 @@ def _leg_length_m(bone_heads_m: np.ndarray, posed_bones: tuple[str, ...]) -> flo
     return float(np.linalg.norm(knee - hip) + np.linalg.norm(ankle - knee))
 
 
+def person_pose(body: BodyModel, bone_heads_m: np.ndarray, track: ActivityTrack, paths: Paths, person: int,
+                fps: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """One person's pose along their path: a gait style drawn from ``rng``, the gait channels of their activity
+    ``track``, turned into body-model rotations facing the path's heading.
+
+    Args:
+        bone_heads_m: (B, 3) the person's rest bone heads (``RestSkeleton.bone_heads_m``), metres.
+        paths: every person's ground paths; ``person`` picks theirs.
+
+    Returns:
+        rotmats: (F, B, 3, 3) local bone rotations; root_xy_m: (F, 2) root ground position (path plus sway), metres.
+    """
+    style = draw_style(rng)
+    channels, sway = gait_channels(track, paths, person, _leg_length_m(bone_heads_m, body.posed_bones), style, fps,
+                                   rng)
+    heading = paths.heading_rad[person]
+    # The reference body faces -y: yaw psi + pi/2 makes it face heading psi.
+    geometry = arm_geometry(bone_heads_m, body.posed_bones)
+    rotmats = channels_to_rotmats(channels, heading + 0.5 * np.pi, geometry, body.posed_bones)
+    forward = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    left = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
+    return rotmats, paths.position_m[person] + sway[:, :1] * left + sway[:, 1:] * forward
+
+
 def _keypoints(body: BodyModel, rest: RestSkeleton, rotmats: torch.Tensor, translation_m: np.ndarray) -> np.ndarray:
     translation = torch.as_tensor(translation_m, dtype=body.dtype, device=body.device)
     with torch.no_grad():
@@ -121,17 +145,7 @@ def generate_motions(
     rotmats = np.empty((num_people, num_frames, body.num_posed_bones, 3, 3))
     root_xy = np.empty((num_people, num_frames, 2))
     for p in range(num_people):
-        style = draw_style(rng)
-        channels, sway = gait_channels(
-            tracks[p], paths, p, _leg_length_m(heads[p], body.posed_bones), style, fps, rng
-        )
-        heading = paths.heading_rad[p]
-        # The reference body faces -y: yaw psi + pi/2 makes it face heading psi.
-        geometry = arm_geometry(heads[p], body.posed_bones)
-        rotmats[p] = channels_to_rotmats(channels, heading + 0.5 * np.pi, geometry, body.posed_bones)
-        forward = np.stack([np.cos(heading), np.sin(heading)], axis=1)
-        left = np.stack([-np.sin(heading), np.cos(heading)], axis=1)
-        root_xy[p] = paths.position_m[p] + sway[:, :1] * left + sway[:, 1:] * forward
+        rotmats[p], root_xy[p] = person_pose(body, heads[p], tracks[p], paths, p, fps, rng)
 
     rotmats_t = torch.as_tensor(rotmats, dtype=body.dtype, device=body.device)
     rotmats = rotmats_t.double().cpu().numpy()  # exactly what the body model sees
