@@ -6,8 +6,8 @@ import dagster as dg
 import pandas as pd
 
 from assets.bodies import fitting_prior
-from assets.checks import latest_check_outcomes
 from assets.common import ON_REQUEST_KEY, table_metadata, table_output
+from assets.metric_tables import failed_camera_checks
 from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
 from evaluation.method_comparison import METHODS, method_metric_table
@@ -62,8 +62,7 @@ def method_tables(context: dg.AssetExecutionContext, config: MethodTableSettings
     if not gt or len(gt_associations) == 0 or len(gt_poses3d) == 0:
         context.log.info(f"{spec.key}: no known cameras, identities or 3D poses: no method rows")
         return table_output(empty_table("metrics"), "metrics", rows=0)
-    outcomes = latest_check_outcomes(context.instance, dg.AssetKey("extrinsics"), context.partition_key)
-    failed = ",".join(sorted(o.check for o in outcomes if not o.passed)) if outcomes else "unchecked"
+    failed = failed_camera_checks(context)
     dense, lifted = lifted_from_table(detections)
     with torch_runtime.applied():
         table = method_metric_table(

@@ -73,7 +73,7 @@ def metric_tables(
                                  gt_people),
         ]
     if gt:
-        failed = _failed_camera_checks(context)
+        failed = failed_camera_checks(context)
         parts.append(camera_metrics_table(spec.dataset, spec.sequence, estimated, gt,
                                           raw_detections if identified else None, gt_associations if identified else None,
                                           failed_checks=failed))
@@ -113,7 +113,7 @@ def metric_tables(
     )
 
 
-def _failed_camera_checks(context: dg.AssetExecutionContext) -> str:
+def failed_camera_checks(context: dg.AssetExecutionContext) -> str:
     """The checks that the cameras of ``extrinsics`` in this partition failed, comma-separated ("" if none).
 
     Read from the checks of its latest materialization (the cameras this asset reads); cameras whose checks were

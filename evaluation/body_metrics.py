@@ -17,13 +17,13 @@ estimated world) and ``seconds``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 import torch
 
 from evaluation.association_metrics import protocol_of, skeletons_in_truth
+from evaluation.camera_metrics import camera_metrics
 from evaluation.protocols import MetricRow, evaluate_reprojection, metrics_table
 from humancal.association import associate, to_associations_table, to_skeletons_table
 from humancal.body import BodyModel
@@ -35,7 +35,7 @@ from humancal.lifter import lifted_from_table
 from humancal.poses import poses_to_dense
 from humancal.sequences import SequenceSpec
 
-__all__ = ["PIPELINE_METHOD", "body_metric_rows", "keypoints_table", "pipeline_body_table", "skeleton_accel_rows"]
+__all__ = ["PIPELINE_METHOD", "body_metric_rows", "camera_and_body_rows", "keypoints_table", "pipeline_body_table", "skeleton_accel_rows"]
 
 PVE_MAX_FRAMES = 60
 """Frames per person whose vertices the PVE compares (evenly spread; a full mesh per frame is costly)."""
@@ -161,6 +161,20 @@ def skeleton_accel_rows(spec: SequenceSpec, *, skeletons3d: pd.DataFrame, associ
     return rows
 
 
+def camera_and_body_rows(spec: SequenceSpec, *, motions: pd.DataFrame, cameras: list[Camera], seconds: float,
+                         associations: pd.DataFrame, detections: pd.DataFrame, gt_associations: pd.DataFrame,
+                         gt_poses3d: pd.DataFrame, gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
+                         body: BodyModel, fps: float, with_cameras: bool) -> list[MetricRow]:
+    """The body rows of one fit (its reprojection error named ``fit_reprojection_error_px``) and, with
+    ``with_cameras``, the camera rows of the cameras it ended with."""
+    rows = body_metric_rows(spec, motions=motions, fps=fps, seconds=seconds, associations=associations,
+                            detections=detections, cameras=cameras, gt_associations=gt_associations,
+                            gt_poses3d=gt_poses3d, gt_cameras=gt_cameras, gt_motions=gt_motions, body=body)
+    rows = [MetricRow("fit_" + r.metric, r.value, r.unit, view=r.view) if r.metric.startswith("reprojection")
+            else r for r in rows]
+    return camera_metrics(cameras, gt_cameras, detections, gt_associations) + rows if with_cameras else rows
+
+
 PIPELINE_METHOD = {"int_ext": "int_ext", "ext": "ext_init_focal", "fixed": "init"}
 """The method name of the pipeline's own fit per camera regime (``BodyFitConfig.cameras``): with the default
 (``int_ext``) the fit is the paper's fully self-calibrated row; with the cameras held it is the ``init`` row."""
@@ -183,8 +197,6 @@ def pipeline_body_table(spec: SequenceSpec, *, body: BodyModel, regime: str, fps
         detections: the 2D detections.
         failed_checks: the checks the init cameras failed (as the camera rows).
     """
-    from evaluation.method_comparison import camera_and_body_rows
-
     parts = []
     rows = camera_and_body_rows(
         spec, motions=fitted_motions, cameras=refined_cameras, seconds=fit_seconds, associations=associations,

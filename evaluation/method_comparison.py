@@ -17,8 +17,8 @@ method              cameras                                                  ref
 local-linear term / with one-directional GRUs / without the skip connection (only where their weights exist).
 =================== ======================================================== =========================== ============
 
-Every method gets the body rows of :func:`evaluation.body_metrics.body_metric_rows`, its fitted keypoints'
-reprojection error named ``fit_reprojection_error_px`` (``reprojection_error_px`` is the camera row's name).
+Every method gets the rows of :func:`evaluation.body_metrics.camera_and_body_rows`: the body rows, its fitted
+keypoints' reprojection error named ``fit_reprojection_error_px`` (``reprojection_error_px`` is the camera row's name).
 Methods whose cameras differ from both the pipeline's init (whose camera rows are the metric table's ``init``
 rows) and the truth get the camera rows of :func:`evaluation.camera_metrics.camera_metrics` too
 (``focal_error_pct``, ``position_error_mm``, ``angle_error_deg``, ``reprojection_error_px``: the definitions of
@@ -33,9 +33,8 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from evaluation.body_metrics import body_metric_rows
-from evaluation.camera_metrics import camera_metrics
-from evaluation.protocols import MetricRow, metrics_table
+from evaluation.body_metrics import camera_and_body_rows
+from evaluation.protocols import metrics_table
 from humancal.association import associate, to_associations_table, to_skeletons_table
 from humancal.body import BodyModel
 from humancal.camera import Camera, CameraRig
@@ -45,7 +44,7 @@ from humancal.lifter import LiftedPoses
 from humancal.prior import MotionVAE
 from humancal.sequences import SequenceSpec
 
-__all__ = ["METHODS", "Method", "camera_and_body_rows", "method_metric_table"]
+__all__ = ["METHODS", "Method", "method_metric_table"]
 
 
 @dataclass(frozen=True)
@@ -76,20 +75,6 @@ METHODS: dict[str, Method] = {
 def _with_true_intrinsics(cameras: list[Camera], gt_cameras: list[Camera]) -> list[Camera]:
     return [Camera(g.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, g.distortion)
             for c, g in zip(cameras, gt_cameras)]
-
-
-def camera_and_body_rows(spec: SequenceSpec, *, motions: pd.DataFrame, cameras: list[Camera], seconds: float,
-                         associations: pd.DataFrame, detections: pd.DataFrame, gt_associations: pd.DataFrame,
-                         gt_poses3d: pd.DataFrame, gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
-                         body: BodyModel, fps: float, with_cameras: bool) -> list[MetricRow]:
-    """The body rows of one fit (its reprojection error named ``fit_reprojection_error_px``) and, with
-    ``with_cameras``, the camera rows of the cameras it ended with."""
-    rows = body_metric_rows(spec, motions=motions, fps=fps, seconds=seconds, associations=associations,
-                            detections=detections, cameras=cameras, gt_associations=gt_associations,
-                            gt_poses3d=gt_poses3d, gt_cameras=gt_cameras, gt_motions=gt_motions, body=body)
-    rows = [MetricRow("fit_" + r.metric, r.value, r.unit, view=r.view) if r.metric.startswith("reprojection")
-            else r for r in rows]
-    return camera_metrics(cameras, gt_cameras, detections, gt_associations) + rows if with_cameras else rows
 
 
 def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Callable[[str], MotionVAE | None],

@@ -22,7 +22,6 @@ import argparse  # noqa: E402
 from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 _METRICS = ("focal_error_pct", "position_error_mm", "angle_error_deg", "reprojection_error_px", "mpjpe_mm",

@@ -49,6 +49,8 @@ def test_the_variables_start_at_the_rig_and_carry_gradients(scene_inputs):  # no
     np.testing.assert_allclose(with_k1.to_rig().distortion[:, 0], rig.distortion[:, 0] + 0.01)
     with pytest.raises(ValueError, match="camera regime 'intrinsics' must be one of"):
         CameraVariables(rig, "intrinsics")
+    with pytest.raises(ValueError, match=r"BodyFitConfig.cameras='intrinsics' must be one of \['fixed', 'ext', 'int_ext'\]"):
+        BodyFitConfig(cameras="intrinsics")
 
 
 def test_joint_refinement_brings_perturbed_cameras_back(body_model, scene_inputs):  # noqa: F811
