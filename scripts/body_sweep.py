@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import argparse
 import os
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from sweep_summary import run_and_summarise
 
 _METRICS = ("mpjpe_mm", "pa_mpjpe_mm", "pcp_avg", "accel_error_mm_s2", "pve_mm", "reprojection_error_px", "seconds")
 
@@ -89,21 +89,11 @@ def main() -> None:
     args = parser.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     jobs = [(i, args.seed) for i in range(args.scenes)]
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        table = pd.concat(list(pool.map(run_scene, jobs)), ignore_index=True)
-    args.out.mkdir(parents=True, exist_ok=True)
-    table.to_csv(args.out / "body_sweep.csv", index=False)
-    figures = table[table["metric"].isin(_METRICS)]
-    summary = figures.groupby(["method", "metric"])["value"].agg(["median", "mean"]).unstack("metric")
-    print("\nover all scenes (median, then mean):")
-    print(summary["median"].round(2).to_string())
-    print(summary["mean"].round(2).to_string())
-    wide = figures.pivot_table(index="scene", columns=["method", "metric"], values="value")
+    wide = run_and_summarise(run_scene, jobs, args.jobs, _METRICS, args.out / "body_sweep.csv")
     for metric in ("mpjpe_mm", "accel_error_mm_s2"):
         beats = {m: int((wide[("fit", metric)] < wide[(m, metric)]).sum())
                  for m in ("fit_per_frame_prior", "fit_no_prior", "skeletons3d")}
         print(f"{metric}: the prior fit is lower than {beats} of {len(wide)} scenes")
-    print(f"written {args.out / 'body_sweep.csv'}")
 
 
 if __name__ == "__main__":

@@ -19,10 +19,10 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pandas as pd  # noqa: E402
+from sweep_summary import run_and_summarise  # noqa: E402
 
 _METRICS = ("focal_error_pct", "position_error_mm", "angle_error_deg", "reprojection_error_px", "mpjpe_mm",
             "pa_mpjpe_mm", "pcp_avg", "accel_error_mm_s2", "pve_mm", "seconds")
@@ -113,22 +113,12 @@ def main() -> None:
     overrides = dict((k, _parse_value(v)) for k, v in (s.split("=", 1) for s in args.set))
     methods = tuple(args.methods.split(","))
     jobs = [(i, args.seed, methods, overrides) for i in range(args.scenes)]
-    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        table = pd.concat(list(pool.map(run_scene, jobs)), ignore_index=True)
-    args.out.mkdir(parents=True, exist_ok=True)
-    table.to_csv(args.out / "refinement_sweep.csv", index=False)
-    figures = table[table["metric"].isin(_METRICS)]
-    summary = figures.groupby(["method", "metric"])["value"].agg(["median", "mean"]).unstack("metric")
-    print("\nover all scenes (median, then mean):")
-    print(summary["median"].round(2).to_string())
-    print(summary["mean"].round(2).to_string())
-    wide = figures.pivot_table(index="scene", columns=["method", "metric"], values="value", aggfunc="first")
+    wide = run_and_summarise(run_scene, jobs, args.jobs, _METRICS, args.out / "refinement_sweep.csv")
     if "int_ext" in methods:
         for metric in ("focal_error_pct", "position_error_mm", "angle_error_deg", "reprojection_error_px"):
             if ("init", metric) in wide and ("int_ext", metric) in wide:
                 better = int((wide[("int_ext", metric)] < wide[("init", metric)]).sum())
                 print(f"{metric}: int_ext below init in {better} of {len(wide)} scenes")
-    print(f"written {args.out / 'refinement_sweep.csv'}")
 
 
 if __name__ == "__main__":
