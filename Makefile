@@ -21,8 +21,12 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/humancal demo
 
+# The tests run in parallel (one worker per file, TEST_WORKERS of them). The body model's cache is built first, once,
+# so that the workers do not race to write it on a fresh machine.
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -c "from humancal.body import BodyModel; BodyModel()"
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m ''
