@@ -20,6 +20,7 @@ from humancal.calibration import (
     plot_rigs,
 )
 from humancal.camera import cameras_to_table
+from humancal.inputs import sequence_principal_points
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
 from humancal.validation import (
@@ -29,6 +30,7 @@ from humancal.validation import (
     check_focal_plausible,
     check_rig_geometry,
 )
+from resources.datasets import DatasetsResource
 from resources.torch import TorchResource
 
 MIN_UPRIGHT_PER_VIEW = 20
@@ -90,14 +92,23 @@ def detections(
     ],
 )
 def intrinsics(
-    context: dg.AssetExecutionContext, config: IntrinsicsSettings, detections: pd.DataFrame, views: pd.DataFrame
+    context: dg.AssetExecutionContext, config: IntrinsicsSettings, datasets: DatasetsResource,
+    detections: pd.DataFrame, views: pd.DataFrame
 ):
     """Per view: focal length from the upright people's vertical vanishing point and heights (the paper's III-B),
-    with the diagnostics (inliers, vanishing point, camera height and tilt, conditioning)."""
+    with the diagnostics (inliers, vanishing point, camera height and tilt, conditioning). The principal point is the
+    image centre unless the sequence's datasets entry gives it (option ``principal_point``)."""
     start = time.perf_counter()
     dense, lifted = _calibration_inputs(detections)
+    sizes = _image_sizes(views)
+    try:
+        known_pp = sequence_principal_points(datasets.spec(context.partition_key), sizes)
+    except ValueError as error:
+        raise dg.Failure(str(error)) from error
+    if known_pp is not None:
+        context.log.info(f"principal points given by the datasets entry: {known_pp}")
     with _single_threaded_blas():
-        estimates = estimate_intrinsics(dense, lifted, _image_sizes(views), config.to_library())
+        estimates = estimate_intrinsics(dense, lifted, sizes, config.to_library(), principal_point_px=known_pp)
     table = intrinsics_to_table(context.partition_key, estimates)
     seconds = time.perf_counter() - start
     context.log.info(f"intrinsics of {len(estimates)} views in {seconds:.1f} s")

@@ -17,6 +17,9 @@ method              cameras                                                  ref
 local-linear term / with one-directional GRUs / without the skip connection (only where their weights exist).
 =================== ======================================================== =========================== ============
 
+``int_ext_known_pp`` is not one of the paper's rows: it measures what the principal point, which every other
+self-calibrated row holds at the image centre, costs on this sequence (ground truth in a diagnostic row only).
+
 Every method gets the rows of :func:`evaluation.body_metrics.camera_and_body_rows`: the body rows, its fitted
 keypoints' reprojection error named ``fit_reprojection_error_px`` (``reprojection_error_px`` is the camera row's name).
 Methods whose cameras differ from both the pipeline's init (whose camera rows are the metric table's ``init``
@@ -59,6 +62,7 @@ class Method:
 
 METHODS: dict[str, Method] = {
     "int_ext": Method("init", "int_ext"),
+    "int_ext_known_pp": Method("gt_principal_point", "int_ext"),
     "ext": Method("gt_intrinsics", "ext"),
     "gt_cameras": Method("gt", "fixed"),
     "init": Method("init", "fixed"),
@@ -75,6 +79,15 @@ METHODS: dict[str, Method] = {
 def _with_true_intrinsics(cameras: list[Camera], gt_cameras: list[Camera]) -> list[Camera]:
     return [Camera(g.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, g.distortion)
             for c, g in zip(cameras, gt_cameras)]
+
+
+def _with_true_principal_points(cameras: list[Camera], gt_cameras: list[Camera]) -> list[Camera]:
+    moved = []
+    for c, g in zip(cameras, gt_cameras):
+        K = c.K.copy()
+        K[:2, 2] = g.K[:2, 2]
+        moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
+    return moved
 
 
 def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Callable[[str], MotionVAE | None],
@@ -115,6 +128,8 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
             (people, skeletons), used, failed = gt_association, gt_cameras, None
         elif method.cameras == "gt_intrinsics":
             used = _with_true_intrinsics(cameras, gt_cameras)
+        elif method.cameras == "gt_principal_point":
+            used = _with_true_principal_points(cameras, gt_cameras)
         observations, _ = body_observations(dense, people, skeletons, len(used))
         rig = CameraRig.from_cameras(used)
         if method.cameras == "bundle":
@@ -126,6 +141,6 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
             spec, motions=fit.motions.to_table(spec.sequence), cameras=fit.cameras.to_cameras(), seconds=seconds,
             associations=people, detections=detections, gt_associations=gt_associations, gt_poses3d=gt_poses3d,
             gt_cameras=gt_cameras, gt_motions=gt_motions, body=body, fps=fps,
-            with_cameras=method.cameras in ("gt_intrinsics", "bundle") or method.regime != "fixed")
+            with_cameras=method.cameras in ("gt_intrinsics", "gt_principal_point", "bundle") or method.regime != "fixed")
         parts.append(metrics_table(spec.dataset, spec.sequence, name, rows, failed))
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()

@@ -21,7 +21,7 @@ person entries without keypoints; every other problem is a :class:`~humancal.for
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +35,8 @@ from humancal.formats.detections import PLACEHOLDERS_ATTR
 from humancal.formats.skeletons import SKELETONS
 from humancal.tables import empty_table, validate_table
 
-__all__ = ["CAPTURE_FILE", "CaptureConfig", "CaptureSummary", "Capture", "load_capture", "parse_image_size", "read_capture_folder"]
+__all__ = ["CAPTURE_FILE", "CaptureConfig", "CaptureSummary", "Capture", "load_capture", "parse_image_size",
+           "parse_principal_point", "principal_points_option", "read_capture_folder"]
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +58,52 @@ def parse_image_size(text: str, where: str = "image size") -> tuple[int, int]:
     raise ValueError(f"{where}: expected WIDTHxHEIGHT in pixels (e.g. 1920x1080), got {text!r}")
 
 
+def parse_principal_point(text: str, where: str = "principal point") -> tuple[float, float]:
+    """``"963.5,541.2"`` as (cx_px, cy_px).
+
+    Raises:
+        ValueError: not two finite numbers joined by ``,`` (the message names ``where``).
+    """
+    parts = str(text).split(",")
+    try:
+        cx, cy = (float(p) for p in parts) if len(parts) == 2 else (np.nan, np.nan)
+    except ValueError:
+        cx = cy = np.nan
+    if np.isfinite(cx) and np.isfinite(cy):
+        return cx, cy
+    raise ValueError(f"{where}: expected CX,CY in pixels (e.g. 963.5,541.2), got {text!r}")
+
+
+def principal_points_option(value: object, image_sizes_px: Sequence[tuple[int, int]],
+                            where: str = "principal_point") -> tuple[tuple[float, float], ...]:
+    """Known principal points from an option: ``[cx, cy]`` for every view or one ``[cx, cy]`` per view, pixels, each
+    inside its image (``0 <= cx <= width``, ``0 <= cy <= height``).
+
+    Returns:
+        (V,) (cx_px, cy_px), V = ``len(image_sizes_px)``.
+
+    Raises:
+        ValueError: another form, a count other than 1 or V, or a point outside its image (the message names
+            ``where`` and the view).
+    """
+    def is_point(p: object) -> bool:
+        return (isinstance(p, (list, tuple)) and len(p) == 2
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in p))
+
+    V = len(image_sizes_px)
+    if is_point(value):
+        points = [tuple(float(x) for x in value)] * V  # type: ignore[union-attr]
+    elif isinstance(value, (list, tuple)) and len(value) == V and all(is_point(p) for p in value):
+        points = [tuple(float(x) for x in p) for p in value]  # type: ignore[union-attr]
+    else:
+        raise ValueError(f"{where}: expected [cx, cy] in pixels for every view or one [cx, cy] per view ({V}), "
+                         f"got {value!r}")
+    for v, ((cx, cy), (w, h)) in enumerate(zip(points, image_sizes_px)):
+        if not (0.0 <= cx <= w and 0.0 <= cy <= h):
+            raise ValueError(f"{where}: view {v}'s ({cx:g}, {cy:g}) is outside its {w}x{h} image")
+    return tuple(points)  # type: ignore[return-value]
+
+
 @dataclass(frozen=True)
 class CaptureConfig:
     """Where a capture's detections (and, optionally, known cameras) are, and how to read them.
@@ -69,6 +116,8 @@ class CaptureConfig:
         cameras: known cameras file (evaluation only), or ``None``.
         cameras_format: its format (one of ``humancal.formats.CAMERA_FORMATS``; ``None``: from the file name).
         fps: frames per second, when known.
+        principal_points_px: (V,) (cx_px, cy_px) per view when known (used by the calibration, which otherwise
+            puts the principal point at the image centre), or ``None``.
     """
 
     format: str
@@ -78,6 +127,7 @@ class CaptureConfig:
     cameras: Path | None = None
     cameras_format: str | None = None
     fps: float | None = None
+    principal_points_px: tuple[tuple[float, float], ...] | None = None
 
     def __post_init__(self) -> None:
         if self.format not in DETECTION_FORMATS:
@@ -95,6 +145,8 @@ class CaptureConfig:
             raise ValueError(f"cameras.format: expected one of {list(CAMERA_FORMATS)}, got {self.cameras_format!r}")
         if self.fps is not None and not self.fps > 0:
             raise ValueError(f"fps: expected a positive number, got {self.fps!r}")
+        if self.principal_points_px is not None:
+            principal_points_option([list(p) for p in self.principal_points_px], self.image_sizes_px)
 
     @classmethod
     def from_options(cls, options: Mapping[str, Any], base_dir: Path | None) -> CaptureConfig:
@@ -109,9 +161,10 @@ class CaptureConfig:
             p = Path(value).expanduser()
             return p if p.is_absolute() or base_dir is None else (base_dir / p)
 
-        unknown = sorted(set(options) - {"format", "views", "image_size", "skeleton", "cameras", "fps"})
+        known = ("format", "views", "image_size", "skeleton", "cameras", "fps", "principal_point")
+        unknown = sorted(set(options) - set(known))
         if unknown:
-            raise ValueError(f"unknown option(s) {unknown}; expected format, views, image_size, skeleton, cameras, fps")
+            raise ValueError(f"unknown option(s) {unknown}; expected {', '.join(known)}")
         views = options.get("views")
         if not isinstance(views, list) or not views:
             raise ValueError(f"views: expected a list of paths (one per view), got {views!r}")
@@ -136,6 +189,8 @@ class CaptureConfig:
             cameras=cam_path,
             cameras_format=cam_format,
             fps=options.get("fps"),
+            principal_points_px=(principal_points_option(options["principal_point"], sizes)  # type: ignore[arg-type]
+                                 if options.get("principal_point") is not None else None),
         )
 
     def to_options(self) -> dict[str, Any]:
@@ -154,6 +209,10 @@ class CaptureConfig:
                 options["cameras"]["format"] = self.cameras_format
         if self.fps is not None:
             options["fps"] = float(self.fps)
+        if self.principal_points_px is not None:
+            points = {tuple(p) for p in self.principal_points_px}
+            options["principal_point"] = (list(points.pop()) if len(points) == 1
+                                          else [list(p) for p in self.principal_points_px])
         return options
 
 

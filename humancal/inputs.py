@@ -13,7 +13,7 @@ from humancal.sequences import SequenceSpec
 from humancal.settings import DATA_DIR_ENV, DataRootError
 from humancal.tables import empty_table, validate_table
 
-__all__ = ["DEFAULT_FPS", "SequenceInputs", "load_sequence_inputs", "sequence_fps"]
+__all__ = ["DEFAULT_FPS", "SequenceInputs", "load_sequence_inputs", "sequence_fps", "sequence_principal_points"]
 
 DEFAULT_FPS = 30.0
 """The frame rate assumed where a sequence does not say (a capture without ``fps``; Shelf)."""
@@ -59,6 +59,23 @@ def sequence_fps(spec: SequenceSpec) -> tuple[float, str]:
         name = options.pop("preset", "demo")
         return float(preset(name, **options).fps), f"synthetic preset {name!r}"
     return DEFAULT_FPS, f"default: {spec.key} states no frame rate"
+
+
+def sequence_principal_points(spec: SequenceSpec, image_sizes_px: list[tuple[int, int]]
+                              ) -> list[tuple[float, float]] | None:
+    """The known principal points of a sequence (its datasets entry's ``principal_point`` option: ``[cx, cy]`` for
+    every view or one per view, pixels), or None: the calibration then puts them at the image centres.
+
+    Raises:
+        ValueError: a malformed option (the message names the datasets file, the partition and the view).
+    """
+    value = spec.options.get("principal_point")
+    if value is None:
+        return None
+    from humancal.captures import principal_points_option
+
+    where = f"{spec.source or 'the datasets config'}: {spec.key}: principal_point"
+    return list(principal_points_option(value, image_sizes_px, where))
 
 
 def views_from_cameras(cameras: pd.DataFrame) -> pd.DataFrame:

@@ -41,13 +41,16 @@ def add_parser(subparsers) -> None:
                    help="known cameras, one per view in view order (evaluation only: never used by the method)")
     p.add_argument("--cameras-format", choices=CAMERA_FORMATS, help="format of --cameras (default: from the file)")
     p.add_argument("--fps", type=float, help="frames per second")
+    p.add_argument("--principal-point", nargs="+", metavar="CX,CY",
+                   help="known principal point in pixels, e.g. 963.5,541.2: one for all views or one per view "
+                        "(default: the image centre, which the calibration then assumes)")
     p.add_argument("--sequence", default=DEFAULT_SEQUENCE, help=f"the second half of the partition key (default {DEFAULT_SEQUENCE})")
     p.set_defaults(func=cmd_add)
 
 
 def cmd_add(args: argparse.Namespace) -> int:
     """Validate the capture, write it into the user datasets file, register its partition, print a summary."""
-    from humancal.captures import CaptureConfig, load_capture, parse_image_size
+    from humancal.captures import CaptureConfig, load_capture, parse_image_size, parse_principal_point
     from humancal.sequences import (
         DatasetsConfigError,
         add_user_sequence,
@@ -62,6 +65,13 @@ def cmd_add(args: argparse.Namespace) -> int:
         sizes = sizes * len(views)
     elif len(sizes) != len(views):
         raise ValueError(f"--image-size: expected one size or one per view ({len(views)}), got {len(sizes)}")
+    points = None
+    if args.principal_point:
+        points = [parse_principal_point(s, "--principal-point") for s in args.principal_point]
+        if len(points) == 1:
+            points = points * len(views)
+        elif len(points) != len(views):
+            raise ValueError(f"--principal-point: expected one point or one per view ({len(views)}), got {len(points)}")
     if args.cameras_format and not args.cameras:
         raise ValueError("--cameras-format: given without --cameras")
     config = CaptureConfig(
@@ -72,6 +82,7 @@ def cmd_add(args: argparse.Namespace) -> int:
         cameras=args.cameras.expanduser().resolve() if args.cameras else None,
         cameras_format=args.cameras_format,
         fps=args.fps,
+        principal_points_px=tuple(points) if points else None,
     )
     key = partition_key(args.name, args.sequence)
     if key in load_datasets_config():  # the cheap check first; add_user_sequence checks again before writing

@@ -5,7 +5,13 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from evaluation.camera_metrics import camera_errors, camera_metrics, camera_metrics_table, reprojection_errors_per_view
+from evaluation.camera_metrics import (
+    camera_errors,
+    camera_metrics,
+    camera_metrics_table,
+    centred_principal_point_floor,
+    reprojection_errors_per_view,
+)
 from humancal.calibration.alignment import Similarity
 from humancal.camera import Camera, project_points
 from humancal.keypoints import CANONICAL_JOINTS
@@ -115,3 +121,25 @@ def test_metric_rows_and_table():
     assert table.groupby("metric")["view"].apply(lambda v: sorted(v.dropna())).tolist() == [[0, 1, 2]] * 3
     with pytest.raises(ValueError, match="rigs differ"):
         camera_errors(rig[:2], rig)
+
+
+def test_centred_principal_point_floor_is_the_offset_seen_as_a_rotation():
+    rng = np.random.default_rng(3)
+    points = rng.uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 1.8], size=(400, 3))
+    centred = _rig(3)
+    offset = np.array([40.0, -25.0])
+    moved = [Camera(c.K + np.array([[0, 0, offset[0]], [0, 0, offset[1]], [0, 0, 0]]), c.R_cam_from_world,
+                    c.t_cam_from_world_m, c.width_px, c.height_px) for c in centred]
+
+    floor = centred_principal_point_floor(moved, points)
+    focal = np.array([c.K[0, 0] for c in moved])
+    np.testing.assert_allclose(floor["offset_px"], np.hypot(*offset))
+    # The re-estimated pose turns by about the angle the offset subtends, and moves little; the images barely show it.
+    np.testing.assert_allclose(floor["angle_error_deg"], np.degrees(np.arctan(np.hypot(*offset) / focal)), rtol=0.15)
+    assert (floor["position_error_mm"] < 100).all() and (floor["residual_px"] < 2.0).all()
+
+    exact = centred_principal_point_floor(centred, points)
+    np.testing.assert_allclose(exact["angle_error_deg"], 0.0, atol=1e-3)
+    np.testing.assert_allclose(exact["position_error_mm"], 0.0, atol=1e-2)
+    with pytest.raises(ValueError, match="at least 6 points"):
+        centred_principal_point_floor(centred, points[:5])

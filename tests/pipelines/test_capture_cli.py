@@ -164,6 +164,13 @@ def test_bad_arguments_are_errors_that_register_nothing(tmp_path, state, capsys)
     _expect_error(capsys, state, "--image-size", "one size or one per view (2), got 3")
     assert _add("lab", "--openpose", *views, "--image-size", "640by480", "--skeleton", "body25") == 2
     _expect_error(capsys, state, "--image-size", "WIDTHxHEIGHT")
+    size = ["--image-size", "640x480", "--skeleton", "body25"]
+    assert _add("lab", "--openpose", *views, *size, "--principal-point", "1,2", "3,4", "5,6") == 2
+    _expect_error(capsys, state, "--principal-point", "one point or one per view (2), got 3")
+    assert _add("lab", "--openpose", *views, *size, "--principal-point", "320x240") == 2
+    _expect_error(capsys, state, "--principal-point", "CX,CY")
+    assert _add("lab", "--openpose", *views, *size, "--principal-point", "700,240") == 2
+    _expect_error(capsys, state, "principal_point", "outside its 640x480 image")
     assert _add("synthetic", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25") == 2
     _expect_error(capsys, state, "dataset 'synthetic' is defined in", "datasets.yaml")
     assert _add("a__b", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25") == 2
@@ -294,10 +301,14 @@ def _assert_close_to_truth(estimated, truth, label: str, capsys) -> dict:
 
 def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, monkeypatch, capsys, body_model):
     folders, _, truth = _write_synthetic_capture(tmp_path / "capture", body_model)
+    # A known principal point half a pixel off the centre (the truth's): small enough not to matter, and it must
+    # reach the calibrated cameras, which would otherwise have theirs at the image centre.
     args = ["--openpose", *map(str, folders.values()), "--image-size", "1920x1080", "--skeleton", "body25",
-            "--cameras", str(tmp_path / "capture" / "calib.toml")]
+            "--cameras", str(tmp_path / "capture" / "calib.toml"), "--principal-point", "960.5,539.5"]
     estimated = _calibrate_and_compare("oplab__capture", args, tmp_path, monkeypatch, capsys)
     _assert_close_to_truth(estimated, truth, "openpose capture", capsys)
+    for camera in estimated:
+        np.testing.assert_allclose(camera.K[:2, 2], [960.5, 539.5], atol=1e-6)
     assert main(["report", "--partition", "oplab__capture", "--format", "csv"]) == 0
     report = capsys.readouterr().out
     assert "focal_error_pct" in report and "mpjpe" not in report  # known cameras: camera rows; no identities
