@@ -11,7 +11,7 @@ from assets.bodies import latest_fit_seconds
 from assets.settings import BodyFitSettings
 from assets.checks import latest_check_outcomes
 from assets.common import png_metadata, sequence_asset, table_output
-from evaluation.association_metrics import association_metric_table
+from evaluation.association_metrics import associate_tables, association_metric_table
 from evaluation.body_metrics import pipeline_body_table
 from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
@@ -78,11 +78,13 @@ def metric_tables(
                                           raw_detections if identified else None, gt_associations if identified else None,
                                           failed_checks=failed))
         if identified:  # who is who, against the true identities (the association itself never reads them)
+            # the association with the true cameras (evaluation only), once for the association and body rows
+            with_true_cameras = associate_tables(detections, gt, spec.sequence)
             parts.append(association_metric_table(
                 spec, associations=associations, skeletons3d=skeletons3d,
                 seconds=latest_association_seconds(context.instance, context.partition_key),
                 lifted_detections=detections, cameras=estimated, gt_associations=gt_associations,
-                gt_poses3d=gt_poses3d, gt_cameras=gt, failed_checks=failed))
+                gt_poses3d=gt_poses3d, gt_cameras=gt, failed_checks=failed, gt_cameras_association=with_true_cameras))
             with torch_runtime.applied():
                 parts.append(pipeline_body_table(
                     spec, body=body_model.get(), regime=config.cameras, fps=sequence_fps(spec)[0],
@@ -90,7 +92,8 @@ def metric_tables(
                     fit_seconds=latest_fit_seconds(context.instance, context.partition_key),
                     associations=associations, skeletons3d=skeletons3d, lifted_detections=detections,
                     detections=raw_detections, cameras=estimated, gt_associations=gt_associations,
-                    gt_poses3d=gt_poses3d, gt_cameras=gt, gt_motions=gt_motions, failed_checks=failed))
+                    gt_poses3d=gt_poses3d, gt_cameras=gt, gt_motions=gt_motions, failed_checks=failed,
+                    gt_cameras_association=with_true_cameras))
     else:
         context.log.info(f"{spec.key}: no known cameras: no metric rows (the calibrated cameras are in extrinsics)")
     table = pd.concat(parts, ignore_index=True) if parts else empty_table("metrics")

@@ -192,6 +192,17 @@ def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.
     return rows
 
 
+def associate_tables(lifted_detections: pd.DataFrame, cameras: list[Camera], sequence: str,
+                     affinity: AffinityConfig | None = None) -> tuple[pd.DataFrame, pd.DataFrame, float]:
+    """The association of ``lifted_detections`` (the ``detections`` asset) with ``cameras``: its ``associations``
+    and ``skeletons3d`` tables and its run time, seconds. With the true cameras it is evaluation only."""
+    dense, lifted = lifted_from_table(lifted_detections)
+    start = time.perf_counter()
+    result = associate(dense, lifted, CameraRig.from_cameras(cameras), TrackingConfig(affinity=affinity or AffinityConfig()))
+    return (to_associations_table(result, sequence), to_skeletons_table(result, sequence),
+            time.perf_counter() - start)
+
+
 def association_metric_table(
     spec: SequenceSpec,
     *,
@@ -204,6 +215,7 @@ def association_metric_table(
     gt_poses3d: pd.DataFrame,
     gt_cameras: list[Camera],
     failed_checks: str | None = None,
+    gt_cameras_association: tuple[pd.DataFrame, pd.DataFrame, float] | None = None,
 ) -> pd.DataFrame:
     """Rows of method ``association`` (the pipeline's tables), ``epipolar_only`` (the geometric affinity alone,
     associated here from the same detections and cameras; it never feeds the pipeline), and both again with the
@@ -212,22 +224,20 @@ def association_metric_table(
     Args:
         seconds: the pipeline association's run time, seconds (NaN where unknown).
         failed_checks: the checks the estimated cameras failed (as the camera rows).
+        gt_cameras_association: :func:`associate_tables` with the true cameras and the default affinity, when the
+            caller has it already (it is computed here otherwise).
     """
     parts = []
-    dense, lifted = lifted_from_table(lifted_detections)
 
     def run(rig_cameras: list[Camera], affinity: AffinityConfig):
-        start = time.perf_counter()
-        result = associate(dense, lifted, CameraRig.from_cameras(rig_cameras), TrackingConfig(affinity=affinity))
-        return (to_associations_table(result, spec.sequence), to_skeletons_table(result, spec.sequence),
-                time.perf_counter() - start)
+        return associate_tables(lifted_detections, rig_cameras, spec.sequence, affinity)
 
     # method -> (associations, skeletons, seconds, cameras used, failed checks of those cameras)
     methods = {
         "association": (associations, skeletons3d, seconds, cameras, failed_checks),
         "epipolar_only": (*run(cameras, AffinityConfig.epipolar_only()), cameras, failed_checks),
         # with the true cameras: what the association gives when the calibration is perfect (evaluation only)
-        "association_gt_cameras": (*run(gt_cameras, AffinityConfig()), gt_cameras, None),
+        "association_gt_cameras": (*(gt_cameras_association or run(gt_cameras, AffinityConfig())), gt_cameras, None),
         "epipolar_only_gt_cameras": (*run(gt_cameras, AffinityConfig.epipolar_only()), gt_cameras, None),
     }
     for method, (people, skeletons, s, used, failed) in methods.items():

@@ -22,16 +22,14 @@ import numpy as np
 import pandas as pd
 import torch
 
-from evaluation.association_metrics import protocol_of, skeletons_in_truth
+from evaluation.association_metrics import associate_tables, protocol_of, skeletons_in_truth
 from evaluation.camera_metrics import camera_metrics
 from evaluation.protocols import MetricRow, evaluate_reprojection, metrics_table
-from humancal.association import associate, to_associations_table, to_skeletons_table
 from humancal.body import BodyModel
 from humancal.calibration.alignment import align_rig
-from humancal.camera import Camera, CameraRig
+from humancal.camera import Camera
 from humancal.fitting import FittedMotions
 from humancal.keypoints import CANONICAL_JOINTS
-from humancal.lifter import lifted_from_table
 from humancal.poses import poses_to_dense
 from humancal.sequences import SequenceSpec
 
@@ -185,7 +183,9 @@ def pipeline_body_table(spec: SequenceSpec, *, body: BodyModel, regime: str, fps
                         skeletons3d: pd.DataFrame, lifted_detections: pd.DataFrame, detections: pd.DataFrame,
                         cameras: list[Camera], gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
                         gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
-                        failed_checks: str | None = None) -> pd.DataFrame:
+                        failed_checks: str | None = None,
+                        gt_cameras_association: tuple[pd.DataFrame, pd.DataFrame, float] | None = None
+                        ) -> pd.DataFrame:
     """Rows of the pipeline's own fit (method :data:`PIPELINE_METHOD` of its regime: body rows, and the refined
     cameras' rows when they moved) and of the triangulated skeletons it started from (``skeletons3d``; and
     ``skeletons3d_gt_cameras``, the association redone with the true cameras, evaluation only).
@@ -196,6 +196,8 @@ def pipeline_body_table(spec: SequenceSpec, *, body: BodyModel, regime: str, fps
         lifted_detections: the ``detections`` asset (2D + lifted), for the association with the true cameras.
         detections: the 2D detections.
         failed_checks: the checks the init cameras failed (as the camera rows).
+        gt_cameras_association: :func:`evaluation.association_metrics.associate_tables` with the true cameras, when
+            the caller has it already (computed here otherwise).
     """
     parts = []
     rows = camera_and_body_rows(
@@ -203,9 +205,8 @@ def pipeline_body_table(spec: SequenceSpec, *, body: BodyModel, regime: str, fps
         detections=detections, gt_associations=gt_associations, gt_poses3d=gt_poses3d, gt_cameras=gt_cameras,
         gt_motions=gt_motions, body=body, fps=fps, with_cameras=regime != "fixed")
     parts.append(metrics_table(spec.dataset, spec.sequence, PIPELINE_METHOD[regime], rows, failed_checks))
-    dense, lifted = lifted_from_table(lifted_detections)
-    result = associate(dense, lifted, CameraRig.from_cameras(gt_cameras))
-    gt_people, gt_skeletons = to_associations_table(result, spec.sequence), to_skeletons_table(result, spec.sequence)
+    gt_people, gt_skeletons, _ = (gt_cameras_association
+                                  or associate_tables(lifted_detections, gt_cameras, spec.sequence))
     for method, (people, skeletons, used, failed) in {
         "skeletons3d": (associations, skeletons3d, cameras, failed_checks),
         "skeletons3d_gt_cameras": (gt_people, gt_skeletons, gt_cameras, None),

@@ -13,6 +13,8 @@ from humancal.camera import Camera
 
 __all__ = ["people_floor_points_m", "plot_rig_comparison"]
 
+_ANKLES = ("left_ankle", "right_ankle")
+
 
 def people_floor_points_m(
     cameras: list[Camera], detections: pd.DataFrame, associations: pd.DataFrame, max_points: int = 3000
@@ -22,8 +24,9 @@ def people_floor_points_m(
     Returns:
         (N, 3) points in the cameras' world, metres, at most ``max_points`` (evenly subsampled).
     """
-    poses = triangulate_identified(detections, associations, cameras, "")
-    ankles = poses[poses["joint"].isin(["left_ankle", "right_ankle"]) & poses["valid"]]
+    ankle_rows = detections[detections["joint"].isin(_ANKLES)]  # each joint is triangulated on its own
+    poses = triangulate_identified(ankle_rows, associations, cameras, "")
+    ankles = poses[poses["joint"].isin(_ANKLES) & poses["valid"]]
     both = ankles.groupby(["frame", "person_id"])[["x_m", "y_m", "z_m"]].agg(["mean", "count"])
     both = both[both[("x_m", "count")] == 2]
     points = np.stack([both[("x_m", "mean")], both[("y_m", "mean")], np.zeros(len(both))], axis=1)
