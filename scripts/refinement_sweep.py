@@ -8,7 +8,11 @@ does, then fitted by every ``--methods`` regime with the default fit settings. P
 method, then the median and mean of every figure per method, and writes ``<out>/refinement_sweep.csv``.
 
     python scripts/refinement_sweep.py [--scenes 10] [--seed 7] [--jobs 2] [--methods init,int_ext,separate]
-        [--set FIELD=VALUE ...] [--out /tmp/refinement_sweep]
+        [--set FIELD=VALUE ...] [--principal-point-offset PX] [--out /tmp/refinement_sweep]
+
+``--principal-point-offset`` moves every true camera's principal point that far from the image centre
+(``SceneConfig.principal_point_offset_px``), where the calibration assumes it; the method ``int_ext_known_pp``
+then shows what knowing it is worth.
 """
 
 from __future__ import annotations
@@ -56,8 +60,8 @@ def run_scene(job: tuple[int, int, tuple[str, ...], dict]) -> pd.DataFrame:
     from humancal.synthetic import generate_scene
 
     torch.set_num_threads(1)
-    index, seed, methods, overrides = job
-    config = scene_config(index, seed)
+    index, seed, methods, overrides, pp_offset_px = job
+    config = scene_config(index, seed).replace(principal_point_offset_px=pp_offset_px)
     name = f"scene_{index:02d}"
     body = BodyModel()
     scene = generate_scene(config, body, sequence=name)
@@ -108,11 +112,13 @@ def main() -> None:
     parser.add_argument("--methods", default="init,int_ext,separate")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="a BodyFitConfig field for every method (repeatable)")
+    parser.add_argument("--principal-point-offset", type=float, default=0.0, metavar="PX",
+                        help="move the true principal points this far from the image centres (default 0)")
     parser.add_argument("--out", type=Path, default=Path("/tmp/refinement_sweep"))
     args = parser.parse_args()
     overrides = dict((k, _parse_value(v)) for k, v in (s.split("=", 1) for s in args.set))
     methods = tuple(args.methods.split(","))
-    jobs = [(i, args.seed, methods, overrides) for i in range(args.scenes)]
+    jobs = [(i, args.seed, methods, overrides, args.principal_point_offset) for i in range(args.scenes)]
     wide = run_and_summarise(run_scene, jobs, args.jobs, _METRICS, args.out / "refinement_sweep.csv")
     if "int_ext" in methods:
         for metric in ("focal_error_pct", "position_error_mm", "angle_error_deg", "reprojection_error_px"):

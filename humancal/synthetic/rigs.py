@@ -1,6 +1,7 @@
 """Static camera rigs around the capture area: random rings and arcs, and the Human3.6M cameras.
 
-Every camera has square pixels and the principal point at the image centre, is placed so that the capture
+Every camera has square pixels and the principal point at the image centre (unless
+``principal_point_offset_px`` moves it), is placed so that the capture
 area fills about ``area_fill`` of its horizontal field of view (or, with ``camera_pitch_range_deg``, of the
 image extent that binds at the drawn tilt), and is aimed at a point near the area centre at mid-body height
 with a little random error in aim and roll. Lenses are ideal pinholes unless ``distortion_k1_range`` asks for
@@ -312,12 +313,27 @@ def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
         humancal.settings.DataRootError: rig ``"h36m"`` without the data root.
     """
     if config.rig in ("ring", "arc"):
-        return ring_rig(config, rng)
-    if config.rig == "h36m":
+        cameras = ring_rig(config, rng)
+    elif config.rig == "h36m":
         cameras = h36m_rig(config)
-        if config.distortion_k1_range == (0.0, 0.0):
-            return cameras
-        k1 = rng.uniform(*config.distortion_k1_range, len(cameras))
-        return [Camera(c.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px,
-                       np.array([k, 0.0, 0.0, 0.0, 0.0])) for c, k in zip(cameras, k1)]
-    raise ValueError(f"SceneConfig.rig={config.rig!r} is unknown; allowed: 'ring', 'arc', 'h36m'")
+        if config.distortion_k1_range != (0.0, 0.0):
+            k1 = rng.uniform(*config.distortion_k1_range, len(cameras))
+            cameras = [Camera(c.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px,
+                              np.array([k, 0.0, 0.0, 0.0, 0.0])) for c, k in zip(cameras, k1)]
+    else:
+        raise ValueError(f"SceneConfig.rig={config.rig!r} is unknown; allowed: 'ring', 'arc', 'h36m'")
+    return _offset_principal_points(cameras, config.principal_point_offset_px, rng)
+
+
+def _offset_principal_points(cameras: list[Camera], offset_px: float, rng: np.random.Generator) -> list[Camera]:
+    """The cameras with their principal points ``offset_px`` from where they were, each in a drawn direction (no
+    draw when 0: the scenes without an offset keep their random stream)."""
+    if offset_px == 0.0:
+        return cameras
+    angle = rng.uniform(0.0, 2.0 * np.pi, len(cameras))
+    moved = []
+    for c, a in zip(cameras, angle):
+        K = c.K.copy()
+        K[:2, 2] += offset_px * np.array([np.cos(a), np.sin(a)])
+        moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
+    return moved

@@ -172,3 +172,18 @@ def test_k1_is_drawn_only_when_asked_and_keeps_the_area_in_view():
     np.testing.assert_allclose([c.K for c in lensed], [c.K for c in plain])
     for cam in lensed:
         assert np.all(_inside_image(cam, _area_box(config, top_m=0.0)))
+
+
+def test_principal_points_move_only_when_asked():
+    config = SceneConfig(num_views=6, seed=4)
+    centred = make_rig(config, np.random.default_rng(4))
+    moved = make_rig(config.replace(principal_point_offset_px=30.0), np.random.default_rng(4))
+    offsets = np.array([m.K[:2, 2] - c.K[:2, 2] for m, c in zip(moved, centred)])
+    np.testing.assert_allclose(np.linalg.norm(offsets, axis=1), 30.0)
+    assert len({round(float(np.arctan2(y, x)), 6) for x, y in offsets}) == 6  # a direction per camera
+    for m, c in zip(moved, centred):  # everything else is the rig of the same seed without the offset
+        np.testing.assert_array_equal(m.R_cam_from_world, c.R_cam_from_world)
+        np.testing.assert_array_equal(m.t_cam_from_world_m, c.t_cam_from_world_m)
+        assert m.K[0, 0] == c.K[0, 0]
+    with pytest.raises(ValueError, match="principal_point_offset_px"):
+        SceneConfig(principal_point_offset_px=-1.0)
