@@ -51,9 +51,13 @@ SHIPPED_PRIOR_STEM = Path(__file__).resolve().parent.parent / "weights" / "motio
 SHIPPED_VARIANT_STEMS = {
     "motion_prior": SHIPPED_PRIOR_STEM,
     "per_frame": SHIPPED_PRIOR_STEM.with_name("motion_prior_per_frame"),
+    **{variant: SHIPPED_PRIOR_STEM.with_name(f"motion_prior_{variant}")
+       for variant in ("no_skip", "unidirectional", "no_local_linear")
+       if SHIPPED_PRIOR_STEM.with_name(f"motion_prior_{variant}.json").exists()},
 }
-"""The variants humancal ships weights for, and their stems: the default prior, and the per-frame pose prior that
-the body fit's ``fit_per_frame_prior`` baseline uses. The other variants are trained on request."""
+"""The variants humancal ships weights for, and their stems: the default prior; the per-frame pose prior of the body
+fit's ``per_frame_prior`` baseline; the ablations of the paper's Table VII (``no_skip``, ``unidirectional``,
+``no_local_linear``), for the benchmark's method rows."""
 
 _REQUIRED = ("format", "config", "digest", "history", "train_seconds", "train_subjects", "held_out_subjects",
              "held_out", "data_digest")
