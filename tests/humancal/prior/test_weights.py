@@ -11,6 +11,7 @@ from safetensors.torch import load_file, save_file
 
 from humancal.prior import (
     SHIPPED_PRIOR_STEM,
+    SHIPPED_VARIANT_STEMS,
     MotionVAE,
     PriorConfig,
     PriorWeightsError,
@@ -137,8 +138,18 @@ def test_shipped_per_frame_prior_is_valid_and_unknown_variants_are_refused():
     assert info["config"]["variant"] == "per_frame" and model.latent_dim == 32 and not model.config.temporal
     assert info["held_out"]["mpjpe_mm"] <= 21.0  # measured 19.6 mm (docs/motion_prior.md)
     assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
-    with pytest.raises(PriorWeightsError, match=r"no shipped weights of the prior variant 'no_skip'"):
-        shipped_prior("no_skip")
+    with pytest.raises(PriorWeightsError, match=r"no shipped weights of the prior variant 'bidirectional_lstm'"):
+        shipped_prior("bidirectional_lstm")
+
+
+@pytest.mark.parametrize("variant, measured_mm", [("no_skip", 18.3)])
+def test_shipped_ablation_priors_are_valid(variant, measured_mm):
+    if variant not in SHIPPED_VARIANT_STEMS:
+        pytest.fail(f"the ablation prior {variant!r} is not shipped (humancal/weights/motion_prior_{variant}.*)")
+    model, info = shipped_prior(variant)
+    assert info["config"]["variant"] == variant and model.config.temporal
+    assert info["held_out"]["mpjpe_mm"] <= measured_mm + 1.5  # docs/motion_prior.md
+    assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
 
 
 REVERSAL_TOLERANCE_MM = 3.0
