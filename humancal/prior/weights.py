@@ -52,8 +52,7 @@ SHIPPED_VARIANT_STEMS = {
     "motion_prior": SHIPPED_PRIOR_STEM,
     "per_frame": SHIPPED_PRIOR_STEM.with_name("motion_prior_per_frame"),
     **{variant: SHIPPED_PRIOR_STEM.with_name(f"motion_prior_{variant}")
-       for variant in ("no_skip", "unidirectional", "no_local_linear")
-       if SHIPPED_PRIOR_STEM.with_name(f"motion_prior_{variant}.json").exists()},
+       for variant in ("no_skip", "unidirectional", "no_local_linear")},
 }
 """The variants humancal ships weights for, and their stems: the default prior; the per-frame pose prior of the body
 fit's ``per_frame_prior`` baseline; the ablations of the paper's Table VII (``no_skip``, ``unidirectional``,
