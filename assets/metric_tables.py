@@ -19,6 +19,7 @@ from evaluation.rig_plot import plot_rig_comparison
 from evaluation.sequence_metrics import sequence_metric_table
 from humancal.camera import cameras_from_table
 from humancal.inputs import sequence_fps
+from humancal.lifter import lifted_from_table
 from humancal.tables import empty_table
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
@@ -79,7 +80,7 @@ def metric_tables(
                                           failed_checks=failed))
         if identified:  # who is who, against the true identities (the association itself never reads them)
             # the association with the true cameras (evaluation only), once for the association and body rows
-            with_true_cameras = associate_tables(detections, gt, spec.sequence)
+            with_true_cameras = associate_tables(*lifted_from_table(detections), gt, spec.sequence)
             parts.append(association_metric_table(
                 spec, associations=associations, skeletons3d=skeletons3d,
                 seconds=latest_association_seconds(context.instance, context.partition_key),

@@ -38,7 +38,8 @@ from humancal.association import AffinityConfig, TrackingConfig, associate, to_a
 from humancal.associations import Associations
 from humancal.calibration.alignment import align_rig
 from humancal.camera import Camera, CameraRig
-from humancal.lifter import lifted_from_table
+from humancal.detections import DenseDetections
+from humancal.lifter import LiftedPoses, lifted_from_table
 from humancal.sequences import SequenceSpec
 
 __all__ = ["identity_metrics", "identity_confusion", "skeleton_metrics", "skeletons_in_truth", "protocol_of",
@@ -192,11 +193,11 @@ def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.
     return rows
 
 
-def associate_tables(lifted_detections: pd.DataFrame, cameras: list[Camera], sequence: str,
+def associate_tables(dense: DenseDetections, lifted: LiftedPoses, cameras: list[Camera], sequence: str,
                      affinity: AffinityConfig | None = None) -> tuple[pd.DataFrame, pd.DataFrame, float]:
-    """The association of ``lifted_detections`` (the ``detections`` asset) with ``cameras``: its ``associations``
-    and ``skeletons3d`` tables and its run time, seconds. With the true cameras it is evaluation only."""
-    dense, lifted = lifted_from_table(lifted_detections)
+    """The association of the lifted detections (``humancal.lifter.lifted_from_table`` of the ``detections``
+    asset) with ``cameras``: its ``associations`` and ``skeletons3d`` tables and its run time, seconds. With the true
+    cameras it is evaluation only."""
     start = time.perf_counter()
     result = associate(dense, lifted, CameraRig.from_cameras(cameras), TrackingConfig(affinity=affinity or AffinityConfig()))
     return (to_associations_table(result, sequence), to_skeletons_table(result, sequence),
@@ -228,9 +229,10 @@ def association_metric_table(
             caller has it already (it is computed here otherwise).
     """
     parts = []
+    dense, lifted = lifted_from_table(lifted_detections)
 
     def run(rig_cameras: list[Camera], affinity: AffinityConfig):
-        return associate_tables(lifted_detections, rig_cameras, spec.sequence, affinity)
+        return associate_tables(dense, lifted, rig_cameras, spec.sequence, affinity)
 
     # method -> (associations, skeletons, seconds, cameras used, failed checks of those cameras)
     methods = {

@@ -30,6 +30,7 @@ from humancal.calibration.alignment import align_rig
 from humancal.camera import Camera
 from humancal.fitting import FittedMotions
 from humancal.keypoints import CANONICAL_JOINTS
+from humancal.lifter import lifted_from_table
 from humancal.poses import poses_to_dense
 from humancal.sequences import SequenceSpec
 
@@ -206,7 +207,7 @@ def pipeline_body_table(spec: SequenceSpec, *, body: BodyModel, regime: str, fps
         gt_motions=gt_motions, body=body, fps=fps, with_cameras=regime != "fixed")
     parts.append(metrics_table(spec.dataset, spec.sequence, PIPELINE_METHOD[regime], rows, failed_checks))
     gt_people, gt_skeletons, _ = (gt_cameras_association
-                                  or associate_tables(lifted_detections, gt_cameras, spec.sequence))
+                                  or associate_tables(*lifted_from_table(lifted_detections), gt_cameras, spec.sequence))
     for method, (people, skeletons, used, failed) in {
         "skeletons3d": (associations, skeletons3d, cameras, failed_checks),
         "skeletons3d_gt_cameras": (gt_people, gt_skeletons, gt_cameras, None),
