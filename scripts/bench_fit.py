@@ -2,10 +2,12 @@
 
 Builds the synthetic ``benchmark`` scene, lifts its detections with the shipped lifter and associates them with the
 true cameras (none of that is timed), then fits every person's shape and motion with the shipped motion prior
-(:func:`humancal.fitting.fit_bodies`, default settings) and prints the seconds of each stage, the peak memory of the
+(:func:`humancal.fitting.fit_bodies`, default settings; the true cameras held fixed unless ``--cameras`` says
+which of their parameters move from there) and prints the seconds of each stage, the peak memory of the
 process, and the fit's MPJPE and acceleration error against the ground truth beside the triangulated skeletons'.
 
     python scripts/bench_fit.py [--preset benchmark] [--threads 2] [--prior motion_prior|per_frame|none]
+                                [--cameras fixed|ext|int_ext]
 """
 
 from __future__ import annotations
@@ -75,6 +77,8 @@ def main() -> None:
     parser.add_argument("--preset", default="benchmark")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--prior", default="motion_prior", choices=["motion_prior", "per_frame", "none"])
+    parser.add_argument("--cameras", default="fixed", choices=["fixed", "ext", "int_ext"],
+                        help="which camera parameters the fit refines (fixed: the fitted-motions regime)")
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="override a BodyFitConfig field (repeatable), e.g. --set iterations_3d=200")
     args = parser.parse_args()
@@ -82,7 +86,7 @@ def main() -> None:
     for item in args.set:
         name, _, value = item.partition("=")
         overrides[name] = type(getattr(BodyFitConfig(), name))(float(value) if "." in value else int(value))
-    config = BodyFitConfig().replace(**overrides)
+    config = BodyFitConfig().replace(cameras=args.cameras, **overrides)
     torch.set_num_threads(args.threads)
     with threadpoolctl.threadpool_limits(args.threads):
         body = BodyModel()
@@ -97,7 +101,8 @@ def main() -> None:
         observations, warnings = body_observations(dense, people, skeletons, len(rig))
         prior = None if args.prior == "none" else shipped_prior(args.prior)[0]
         print(f"workload: {observations.num_frames} frames, {len(rig)} views, {observations.num_people} people "
-              f"({observations.present.sum()} person-frames), prior {args.prior}, {args.threads} thread(s), "
+              f"({observations.present.sum()} person-frames), prior {args.prior}, cameras {args.cameras}, "
+              f"{args.threads} thread(s), "
               f"settings changed {overrides or 'none'}; "
               f"peak memory before the fit {_peak_rss_mb():.0f} MB")
         reset = _reset_peak()

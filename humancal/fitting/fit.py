@@ -45,7 +45,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from humancal.body import BodyModel
+from humancal.body import BodyModel, RestSkeleton
 from humancal.camera import CameraRig
 from humancal.calibration.types import FOOT_JOINTS
 from humancal.fitting.cameras import CameraVariables
@@ -130,6 +130,7 @@ class _Problem:
         self.present = torch.as_tensor(observations.present, device=body.device)
         self.centre0_m = self.cameras.centre_m.detach().clone()
         self.held_people: tuple[Tensor, Tensor | None, Tensor] | None = None
+        self.held_pose: tuple[Tensor, Tensor | None, RestSkeleton] | None = None
         self.keypoints_px = torch.as_tensor(observations.keypoints_px, **to)
         self.confidence = torch.as_tensor(observations.confidence, **to)
         self.joints = torch.as_tensor(observations.joints_world_m, **to)
@@ -183,11 +184,15 @@ class _Problem:
 
     def keypoints(self) -> tuple[Tensor, Tensor | None, Tensor]:
         """(P, T, 23, 3) keypoints, the seam differences and the (P, T, 22, 3, 3) bone rotations (the held
-        people's, computed once, while only the cameras move)."""
+        people's, computed once, while only the cameras move; the held body pose and shape, decoded once, while
+        only the roots move)."""
         if self.held_people is not None:
             return self.held_people
-        pose6d, seam = self.pose6d()
-        rest = self.body.rest_skeleton(self.phenotypes())
+        if self.held_pose is not None:
+            pose6d, seam, rest = self.held_pose
+        else:
+            pose6d, seam = self.pose6d()
+            rest = self.body.rest_skeleton(self.phenotypes())
         rotmats = self.bone_rotmats(pose6d)
         return self.body.keypoints(rest, rotmats, self.translation), seam, rotmats
 
@@ -266,6 +271,13 @@ def _run_stage(problem: _Problem, stage: str, iterations: int,
             return _optimize(problem, stage, data, variables, iterations, progress)
         finally:
             problem.held_people = None
+    if stage == "global":  # body pose and shape held: decoded once, and no gradient through the decoder
+        with torch.no_grad():
+            problem.held_pose = (*problem.pose6d(), problem.body.rest_skeleton(problem.phenotypes()))
+        try:
+            return _optimize(problem, stage, data, variables, iterations, progress)
+        finally:
+            problem.held_pose = None
     return _optimize(problem, stage, data, variables, iterations, progress)
 
 

@@ -60,3 +60,28 @@ def test_views_must_match_the_cameras(body_model, scene_inputs):
     two = CameraRig.from_cameras(scene.rig[:2])
     with pytest.raises(FittingInputError, match="detections of 3 views, but 2 cameras"):
         fit_bodies(body_model, observations, two, None, FAST)
+
+
+def test_global_stage_moves_only_the_roots_and_decodes_the_held_pose_once(body_model, scene_inputs):
+    from humancal.fitting.fit import _Problem, _run_stage
+
+    scene, observations, rig = scene_inputs
+    prior = shipped_prior()[0].to(dtype=body_model.dtype).eval()
+    problem = _Problem(body_model, observations, rig, prior, FAST)
+    problem.encode_pose()
+    latents, shape = problem.pose_params.detach().clone(), problem.shape_logit.detach().clone()
+    decodes = []
+    decode = prior.decode
+    prior.decode = lambda z: decodes.append(z.shape) or decode(z)
+    try:
+        with torch.no_grad():
+            before = problem.terms("2d")["reprojection"]
+        terms = _run_stage(problem, "global", 3, None)
+    finally:
+        prior.decode = decode
+    # one decoding for the whole stage (the held pose), however many evaluations the line searches make; the
+    # final terms are evaluated after the held pose is released (a second decoding)
+    assert len(decodes) == 2
+    assert problem.held_pose is None
+    assert torch.equal(problem.pose_params.detach(), latents) and torch.equal(problem.shape_logit.detach(), shape)
+    assert terms["reprojection"] < float(before)
