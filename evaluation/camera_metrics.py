@@ -34,6 +34,7 @@ from humancal.camera import Camera
 from humancal.detections import detections_to_dense
 from humancal.geometry.rotations import rotation_distance_deg
 from humancal.geometry.triangulation import reprojection_errors_px, triangulate_dlt
+from humancal.long_tables import unique_rows
 
 __all__ = ["CameraErrors", "camera_errors", "centred_principal_point_floor", "reprojection_errors_per_view", "camera_metrics", "camera_metrics_table"]
 
@@ -120,8 +121,7 @@ def reprojection_errors_per_view(
     person = Associations.from_table(associations).person_of_detections(dense)
     keep = person >= 0
     V = len(cameras)
-    keys, inverse = np.unique(np.c_[dense.frame[keep], person[keep]], axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
+    keys, inverse = unique_rows(np.c_[dense.frame[keep], person[keep]])
     n, J = len(keys), dense.keypoints_px.shape[1]
     px = np.full((V, n, J, 2), np.nan)
     w = np.zeros((V, n, J))

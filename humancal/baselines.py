@@ -18,6 +18,7 @@ from humancal.camera import Camera
 from humancal.detections import detections_to_dense
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
+from humancal.long_tables import unique_rows
 from humancal.tables import empty_table, validate_table
 
 __all__ = ["TriangulationConfig", "triangulate_identified"]
@@ -75,8 +76,7 @@ def triangulate_identified(
     if len(frame) == 0:
         return empty_table("poses3d")
 
-    pairs, slot = np.unique(np.stack([frame, person], 1), axis=0, return_inverse=True)
-    slot = slot.reshape(-1)
+    pairs, slot = unique_rows(np.stack([frame, person], 1))
     flat_key = slot * n_views + view
     if len(np.unique(flat_key)) != len(flat_key):
         raise ValueError("associations give one person two detections in the same view and frame")

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, NUM_JOINTS
+from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
+from humancal.long_tables import name_codes, unique_rows
 
 __all__ = ["DenseDetections", "detections_to_dense"]
 
@@ -47,18 +48,17 @@ def detections_to_dense(detections: pd.DataFrame) -> DenseDetections:
     Raises:
         ValueError: a joint name is not canonical, or a (frame, view, det_id, joint) appears twice.
     """
-    unknown = sorted(set(detections["joint"].unique()) - set(CANONICAL_JOINTS))
-    if unknown:
+    col = name_codes(detections["joint"], CANONICAL_JOINTS)
+    if (col < 0).any():
+        unknown = sorted(map(str, detections["joint"][col < 0].unique()))
         raise ValueError(f"detections: column 'joint' has non-canonical names {unknown[:5]}")
     keys = detections[["frame", "view", "det_id"]].to_numpy(dtype=np.int64)
     if len(keys) == 0:
         z = np.zeros(0, dtype=np.int64)
         return DenseDetections(z, z, z, np.zeros((0, NUM_JOINTS, 2)), np.zeros((0, NUM_JOINTS)))
-    uniq, row = np.unique(keys, axis=0, return_inverse=True)
-    row = row.reshape(-1)
-    col = detections["joint"].map(JOINT_INDEX).to_numpy()
+    uniq, row = unique_rows(keys)
     flat = row * NUM_JOINTS + col
-    if len(np.unique(flat)) != len(flat):
+    if np.bincount(flat, minlength=len(uniq) * NUM_JOINTS).max() > 1:
         raise ValueError("detections: a (frame, view, det_id, joint) appears more than once")
     kp = np.full((len(uniq), NUM_JOINTS, 2), np.nan)
     sc = np.zeros((len(uniq), NUM_JOINTS))

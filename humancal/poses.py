@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from humancal.long_tables import name_codes, unique_rows
+
 __all__ = ["DensePoses", "poses_to_dense"]
 
 
@@ -38,17 +40,16 @@ def poses_to_dense(poses: pd.DataFrame, joint_names: tuple[str, ...] | list[str]
         ValueError: none of ``joint_names`` occurs in the table while it has rows.
     """
     names = tuple(joint_names)
-    index = {n: i for i, n in enumerate(names)}
-    rows = poses[poses["joint"].isin(index)]
+    codes = name_codes(poses["joint"], names)
+    keep = codes >= 0
+    rows, c = poses[keep], codes[keep]
     if len(poses) and not len(rows):
         raise ValueError(f"poses3d: no row has a joint in {list(names)[:5]}...; found {sorted(poses['joint'].unique())[:5]}")
     keys = rows[["frame", "person_id"]].to_numpy(dtype=np.int64)
     if len(keys) == 0:
         z = np.zeros(0, dtype=np.int64)
         return DensePoses(z, z, np.zeros((0, len(names), 3)), np.zeros((0, len(names)), bool), names)
-    uniq, r = np.unique(keys, axis=0, return_inverse=True)
-    r = r.reshape(-1)
-    c = rows["joint"].map(index).to_numpy()
+    uniq, r = unique_rows(keys)
     X = np.full((len(uniq), len(names), 3), np.nan)
     valid = np.zeros((len(uniq), len(names)), bool)
     X[r, c] = rows[["x_m", "y_m", "z_m"]].to_numpy()

@@ -15,6 +15,7 @@ import pandas as pd
 
 from humancal.formats.errors import FormatError
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, NUM_JOINTS
+from humancal.long_tables import name_codes, unique_rows
 from humancal.tables import empty_table, validate_table
 
 __all__ = [
@@ -124,15 +125,13 @@ def detections_to_arrays(detections: pd.DataFrame, *, source: str = "") -> dict[
     table = validate_table(detections, "detections", source=source)
     if not len(table):
         return {}
-    joint = table["joint"].map(JOINT_INDEX)
-    if joint.isna().any():
-        bad = sorted(set(table.loc[joint.isna(), "joint"]))
+    j = name_codes(table["joint"], CANONICAL_JOINTS)
+    if (j < 0).any():
+        bad = sorted(set(table.loc[j < 0, "joint"]))
         raise FormatError(source or None, "joint", f"canonical joint names {list(CANONICAL_JOINTS)}", f"{bad}")
     keys = table[["frame", "view", "det_id"]].to_numpy(dtype=np.int64)
-    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    j = joint.to_numpy(dtype=np.int64)
-    if len(np.unique(inverse * NUM_JOINTS + j)) != len(table):
+    uniq, inverse = unique_rows(keys)
+    if np.bincount(inverse * NUM_JOINTS + j, minlength=len(uniq) * NUM_JOINTS).max() > 1:
         raise FormatError(source or None, "joint", "each (frame, view, det_id, joint) at most once", "duplicated rows")
     kp = np.full((len(uniq), NUM_JOINTS, 2), np.nan)
     sc = np.zeros((len(uniq), NUM_JOINTS))
