@@ -194,6 +194,7 @@ class BodyFitSettings(dg.Config):
     weight_seam: float = library_field(_B, "weight_seam")
     window_frames: int = library_field(_B, "window_frames")
     window_overlap: int = library_field(_B, "window_overlap")
+    latent_start: str = library_field(_B, "latent_start")
     iterations_3d: int = library_field(_B, "iterations_3d")
     learning_rate_3d: float = library_field(_B, "learning_rate_3d")
     iterations_global: int = library_field(_B, "iterations_global")

@@ -10,7 +10,8 @@ __all__ = ["BodyFitConfig"]
 
 _INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iterations_global", "iterations_body",
                    "iterations_cameras", "rounds")
-_CHOICE_FIELDS = {"cameras": ("fixed", "ext", "int_ext")}  # humancal.fitting.cameras.CAMERA_REGIMES
+_CHOICE_FIELDS = {"cameras": ("fixed", "ext", "int_ext"),  # humancal.fitting.cameras.CAMERA_REGIMES
+                  "latent_start": ("prior_mean", "reference_pose")}
 _BOOL_FIELDS = ("fit_shape", "refine_k1")
 
 
@@ -43,6 +44,8 @@ class BodyFitConfig:
         window_frames: frames of one latent window (long sequences are cut into overlapping windows that are
             decoded as one batch; a sequence no longer than this is one window).
         window_overlap: frames shared by consecutive windows.
+        latent_start: where a prior fit's latents start: ``prior_mean`` (z = 0, the prior's mode: a natural
+            average pose) or ``reference_pose`` (the encoding of the body model's reference pose, arms out).
         iterations_3d: Adam steps of the initialisation stage on the triangulated joints (shape, root, pose).
         learning_rate_3d: Adam's initial learning rate there (decays linearly to a tenth).
         iterations_global: L-BFGS iterations of the global stage (root orientation and translation on the 2D
@@ -78,6 +81,7 @@ class BodyFitConfig:
     weight_seam: float = 100.0
     window_frames: int = 32
     window_overlap: int = 6
+    latent_start: str = "prior_mean"
     iterations_3d: int = 300
     iterations_global: int = 10
     iterations_body: int = 30

@@ -19,9 +19,11 @@ joints (``skeletons3d``); then three stages run on all people and all windows at
 
 1. ``fit3d``: shape, root and body pose on the triangulated joints, by Adam (cheap and well conditioned, but
    thousands of nearly separable per-frame problems far from their solution, where one L-BFGS line search for
-   all of them converged several times slower in the trials on synthetic scenes); the latents
-   start from the prior's encoding of the reference pose. (Starting them from the encoding of a raw-angle
-   inverse kinematics was tried and is worse: its poses are far from the prior's, and decode 90 mm away.)
+   all of them converged several times slower in the trials on synthetic scenes); the latents start at the
+   prior's mean, z = 0 (``BodyFitConfig.latent_start``): a natural average pose, from which every person reached
+   their pose sooner than from the encoding of the reference pose (arms out), which was lower in MPJPE in none of
+   ten synthetic scenes. (Starting them from the encoding of a raw-angle inverse kinematics was tried and is
+   worse: its poses are far from the prior's, and decode 85-90 mm away.)
 2. ``cameras`` (when they move): the cameras on the 2D detections, the people held, by L-BFGS;
 3. ``global``: root orientation and translation on the 2D detections, body and cameras held, by L-BFGS;
 4. ``body``: every person's variables on the 2D detections, cameras held, by L-BFGS.
@@ -156,7 +158,9 @@ class _Problem:
     # ---------------------------------------------------------------------------------------------- model
 
     def encode_pose(self) -> None:
-        """Replace the raw 6D body pose by the prior's encoding of it, one latent window at a time."""
+        """Swap the raw 6D body pose for latent windows: the prior's mean (``latent_start="prior_mean"``) or the
+        prior's encoding of the raw pose, one window at a time (``"reference_pose"``: the pose is still the
+        reference pose when this runs)."""
         if self.prior is None or self.latent:
             return
         with torch.no_grad():
@@ -164,7 +168,10 @@ class _Problem:
             pose6d = rotmats_to_pose6d(pose6d_to_rotmats(self.pose_params.detach()))
             windows = self.layout.split(pose6d)  # (P, W, L, 21, 6)
             P, W, L = windows.shape[:3]
-            mu, _ = self.prior.encode(windows.reshape(P * W, L, NUM_PRIOR_BONES, 6))
+            if self.config.latent_start == "prior_mean":
+                mu = windows.new_zeros(P, W, L, self.prior.config.latent_dim)
+            else:
+                mu, _ = self.prior.encode(windows.reshape(P * W, L, NUM_PRIOR_BONES, 6))
         self.pose_params = mu.reshape(P, W, L, -1).clone().requires_grad_()
         self.latent = True
 
@@ -364,7 +371,7 @@ def fit_bodies(
     if prior is not None:
         prior = prior.to(dtype=body.dtype, device=body.device).eval()
     problem = _Problem(body, observations, rig, prior, config)
-    problem.encode_pose()  # prior fits: the body pose is the latent motion, from the encoding of the reference pose
+    problem.encode_pose()  # prior fits: from here the body pose is the latent motion
     seconds["prepare"] = time.perf_counter() - start
     terms: dict[str, float] = {}
     for stage in STAGES:

@@ -85,3 +85,21 @@ def test_global_stage_moves_only_the_roots_and_decodes_the_held_pose_once(body_m
     assert problem.held_pose is None
     assert torch.equal(problem.pose_params.detach(), latents) and torch.equal(problem.shape_logit.detach(), shape)
     assert terms["reprojection"] < float(before)
+
+
+def test_latents_start_at_the_prior_mean_or_the_reference_pose(body_model, scene_inputs):
+    from humancal.fitting.fit import _Problem
+
+    scene, observations, rig = scene_inputs
+    prior = shipped_prior()[0].to(dtype=body_model.dtype).eval()
+    starts = {}
+    for start in ("prior_mean", "reference_pose"):
+        problem = _Problem(body_model, observations, rig, prior, FAST.replace(latent_start=start))
+        problem.encode_pose()
+        assert problem.latent and problem.pose_params.requires_grad
+        starts[start] = problem.pose_params.detach()
+    assert starts["prior_mean"].shape == starts["reference_pose"].shape
+    assert starts["prior_mean"].abs().max() == 0
+    assert starts["reference_pose"].abs().mean() > 0.1  # the reference pose (arms out) is far from the mean
+    with pytest.raises(ValueError, match="latent_start"):
+        BodyFitConfig(latent_start="zeros")
