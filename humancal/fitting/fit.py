@@ -280,7 +280,8 @@ def _run_stage(problem: _Problem, stage: str, iterations: int,
             problem.held_people = None
     if stage == "global":  # body pose and shape held: decoded once, and no gradient through the decoder
         with torch.no_grad():
-            problem.held_pose = (*problem.pose6d(), problem.body.rest_skeleton(problem.phenotypes()))
+            pose6d, seam = problem.pose6d()  # the no-prior fit's pose is its own leaf: detached here
+            problem.held_pose = (pose6d.detach(), seam, problem.body.rest_skeleton(problem.phenotypes()))
         try:
             return _optimize(problem, stage, data, variables, iterations, progress)
         finally:

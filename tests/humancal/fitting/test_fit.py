@@ -79,8 +79,8 @@ def test_global_stage_moves_only_the_roots_and_decodes_the_held_pose_once(body_m
         terms = _run_stage(problem, "global", 3, None)
     finally:
         prior.decode = decode
-    # one decoding for the whole stage (the held pose), however many evaluations the line searches make; the
-    # final terms are evaluated after the held pose is released (a second decoding)
+    # one decoding for `before` and one for the whole stage (the held pose), however many evaluations its line
+    # searches make
     assert len(decodes) == 2
     assert problem.held_pose is None
     assert torch.equal(problem.pose_params.detach(), latents) and torch.equal(problem.shape_logit.detach(), shape)
