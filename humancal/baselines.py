@@ -18,7 +18,7 @@ from humancal.camera import Camera
 from humancal.detections import detections_to_dense
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
-from humancal.long_tables import unique_rows
+from humancal.long_tables import has_repeats, unique_rows
 from humancal.tables import empty_table, validate_table
 
 __all__ = ["TriangulationConfig", "triangulate_identified"]
@@ -78,7 +78,7 @@ def triangulate_identified(
 
     pairs, slot = unique_rows(np.stack([frame, person], 1))
     flat_key = slot * n_views + view
-    if len(np.unique(flat_key)) != len(flat_key):
+    if has_repeats(flat_key, len(pairs) * n_views):
         raise ValueError("associations give one person two detections in the same view and frame")
     S = len(pairs)
     points = np.full((n_views, S, NUM_JOINTS, 2), np.nan)

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
-from humancal.long_tables import name_codes, unique_rows
+from humancal.long_tables import has_repeats, name_codes, unique_rows
 
 __all__ = ["DenseDetections", "detections_to_dense"]
 
@@ -58,7 +58,7 @@ def detections_to_dense(detections: pd.DataFrame) -> DenseDetections:
         return DenseDetections(z, z, z, np.zeros((0, NUM_JOINTS, 2)), np.zeros((0, NUM_JOINTS)))
     uniq, row = unique_rows(keys)
     flat = row * NUM_JOINTS + col
-    if np.bincount(flat, minlength=len(uniq) * NUM_JOINTS).max() > 1:
+    if has_repeats(flat, len(uniq) * NUM_JOINTS):
         raise ValueError("detections: a (frame, view, det_id, joint) appears more than once")
     kp = np.full((len(uniq), NUM_JOINTS, 2), np.nan)
     sc = np.zeros((len(uniq), NUM_JOINTS))

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-__all__ = ["unique_rows", "name_codes"]
+__all__ = ["unique_rows", "name_codes", "has_repeats"]
 
 _MAX_CODE = 2**62
 
@@ -49,3 +49,14 @@ def unique_rows(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def name_codes(names: pd.Series, vocabulary: Sequence[str]) -> np.ndarray:
     """(N,) int64 index of each name in ``vocabulary``; -1 for a name outside it (or a missing value)."""
     return pd.Index(list(vocabulary)).get_indexer(names).astype(np.int64)
+
+
+def has_repeats(cells: np.ndarray, num_cells: int) -> bool:
+    """Whether any cell index occurs twice (e.g. ``row * NUM_JOINTS + joint``: one table row per array cell).
+
+    Args:
+        cells: (N,) integers in ``[0, num_cells)``.
+        num_cells: the number of cells.
+    """
+    cells = np.asarray(cells, dtype=np.int64)
+    return bool(len(cells)) and int(np.bincount(cells, minlength=num_cells).max()) > 1

@@ -30,3 +30,11 @@ def test_unique_rows_of_nothing_and_bad_shapes():
 def test_name_codes_marks_unknown_and_missing_names():
     names = pd.Series(["b", "a", "z", None, "c", "a"], dtype="string")
     np.testing.assert_array_equal(name_codes(names, ("a", "b", "c")), [1, 0, -1, -1, 2, 0])
+
+
+def test_has_repeats():
+    from humancal.long_tables import has_repeats
+
+    assert not has_repeats(np.array([0, 3, 1]), 4)
+    assert has_repeats(np.array([0, 3, 3]), 4)
+    assert not has_repeats(np.zeros(0, dtype=np.int64), 0)

@@ -15,7 +15,7 @@ import pandas as pd
 
 from humancal.formats.errors import FormatError
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, NUM_JOINTS
-from humancal.long_tables import name_codes, unique_rows
+from humancal.long_tables import has_repeats, name_codes, unique_rows
 from humancal.tables import empty_table, validate_table
 
 __all__ = [
@@ -131,7 +131,7 @@ def detections_to_arrays(detections: pd.DataFrame, *, source: str = "") -> dict[
         raise FormatError(source or None, "joint", f"canonical joint names {list(CANONICAL_JOINTS)}", f"{bad}")
     keys = table[["frame", "view", "det_id"]].to_numpy(dtype=np.int64)
     uniq, inverse = unique_rows(keys)
-    if np.bincount(inverse * NUM_JOINTS + j, minlength=len(uniq) * NUM_JOINTS).max() > 1:
+    if has_repeats(inverse * NUM_JOINTS + j, len(uniq) * NUM_JOINTS):
         raise FormatError(source or None, "joint", "each (frame, view, det_id, joint) at most once", "duplicated rows")
     kp = np.full((len(uniq), NUM_JOINTS, 2), np.nan)
     sc = np.zeros((len(uniq), NUM_JOINTS))
