@@ -13,7 +13,6 @@ from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.fit import INITIAL_PHENOTYPES, STAGES, BodyFitResult, fit_bodies
 from humancal.fitting.motions import FittedMotions
 from humancal.fitting.observations import BodyObservations, FittingInputError, body_observations
-from humancal.fitting.windows import WindowLayout, window_layout
 
 __all__ = [
     "BodyFitConfig",
@@ -26,9 +25,7 @@ __all__ = [
     "FittingInputError",
     "INITIAL_PHENOTYPES",
     "STAGES",
-    "WindowLayout",
     "body_observations",
     "bundle_adjust",
     "fit_bodies",
-    "window_layout",
 ]

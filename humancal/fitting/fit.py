@@ -10,7 +10,7 @@ Variables per camera (``BodyFitConfig.cameras``, ``humancal.fitting.cameras``): 
 Objective (``BodyFitConfig`` documents the units): a confidence-weighted Geman-McClure reprojection term of the
 23 canonical keypoints in every view, through the shared camera model (``humancal.geometry.projection``); the
 latent prior ``mean(z^2)``; the local-linear term ``mean((z[t+1] - 2 z[t] + z[t-1])^2)``; a shape prior; a root
-smoothness term; for long sequences cut into windows (``humancal.fitting.windows``), a seam term; the
+smoothness term; for long sequences cut into windows (``humancal.prior.windows``), a seam term; the
 interpenetration of different people (``humancal.fitting.contact``); and, when the cameras move, a weak tie of
 each camera to its initial value.
 
@@ -55,11 +55,11 @@ from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.contact import interpenetration
 from humancal.fitting.motions import FittedMotions
 from humancal.fitting.observations import BodyObservations, FittingInputError
-from humancal.fitting.windows import window_layout
 from humancal.lifter.pose_cues import standing_score
 from humancal.prior.config import NUM_PRIOR_BONES
 from humancal.prior.fitting import KeypointObservations, initial_root
 from humancal.prior.model import MotionVAE, identity_pose6d, pose6d_to_rotmats, rotmats_to_pose6d, with_root
+from humancal.prior.windows import window_layout
 
 __all__ = ["BodyFitResult", "fit_bodies", "INITIAL_PHENOTYPES", "STAGES"]
 

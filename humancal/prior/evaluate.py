@@ -1,7 +1,7 @@
 """How good the motion prior is on held-out subjects: reconstruction, and denoising / completion of corrupted clips.
 
-Reconstruction (:func:`reconstruction_report`): every held-out clip, whole (the prior takes any length), encoded
-to its posterior means and decoded; the 23 canonical keypoints of the decoded and of the original pose are
+Reconstruction (:func:`reconstruction_report`): every held-out clip, cut into the windows the body fit decodes
+(:data:`RECONSTRUCTION_WINDOW`; or whole), encoded to its posterior means and decoded; the 23 canonical keypoints of the decoded and of the original pose are
 compared through the body model with the root at the identity orientation and the origin (the prior does not
 model the root), so the error is the body pose's alone.
 
@@ -38,6 +38,7 @@ from humancal.camera import Camera, intrinsic_matrices
 from humancal.geometry.pose_errors import mpjpe_mm
 from humancal.prior.fitting import FitConfig, KeypointObservations, fit_motion
 from humancal.prior.model import MotionVAE, pose6d_to_rotmats, rotmats_to_pose6d, with_root
+from humancal.prior.windows import reconstruct_in_windows
 from humancal.retarget import RetargetedClip
 from humancal.synthetic.rigs import look_at
 
@@ -47,6 +48,7 @@ __all__ = [
     "DENOISE_NOISE_M",
     "DENOISE_NOISE_PX",
     "MotionSegment",
+    "RECONSTRUCTION_WINDOW",
     "accel_error_mm_s2",
     "corrupt_keypoints_2d",
     "corrupt_keypoints_3d",
@@ -60,6 +62,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+RECONSTRUCTION_WINDOW = (32, 6)
+"""(frames, overlap) of the windows the reconstruction cuts clips into: those of the body fit
+(``BodyFitConfig.window_frames``, ``window_overlap``), the way the product applies the prior. The prior is trained
+on 16-frame windows; decoded whole, clips of hundreds of frames come out worse (``docs/motion_prior.md``)."""
 DENOISE_NOISE_M = 0.03
 """Standard deviation of the 3D keypoint noise, metres per coordinate."""
 DENOISE_MISSING = 0.2
@@ -135,13 +141,17 @@ def _errors(pred_m: np.ndarray, gt_m: np.ndarray, fps: float) -> dict[str, float
 
 
 @torch.no_grad()
-def reconstruction_report(prior: MotionVAE, clips: Sequence[RetargetedClip], body: BodyModel) -> dict[str, float]:
-    """Encode (posterior means) and decode every clip, whole; errors of the keypoints with the root at identity.
+@torch.no_grad()
+def reconstruction_report(prior: MotionVAE, clips: Sequence[RetargetedClip], body: BodyModel,
+                          window: tuple[int, int] | None = RECONSTRUCTION_WINDOW) -> dict[str, float]:
+    """Encode (posterior means) and decode every clip; errors of the keypoints with the root at identity.
 
     Args:
         prior: the motion VAE.
         clips: the (held-out) clips; each needs at least three frames.
         body: the body model.
+        window: (frames, overlap) of the windows each clip is cut into, as the body fit applies the prior
+            (:func:`humancal.prior.windows.reconstruct_in_windows`); None encodes and decodes every clip whole.
 
     Returns:
         ``mpjpe_mm`` (mean over every frame and keypoint), ``accel_error_mm_s2`` (over every frame with two
@@ -159,9 +169,13 @@ def reconstruction_report(prior: MotionVAE, clips: Sequence[RetargetedClip], bod
     for clip in clips:
         rotmats = torch.as_tensor(np.array(clip.bone_rotmats_local), **to)[None]  # (1, T, 22, 3, 3)
         T = rotmats.shape[1]
-        mu, _ = prior.encode(rotmats_to_pose6d(rotmats[:, :, 1:]))
+        pose6d = rotmats_to_pose6d(rotmats[:, :, 1:])
+        if window is None:
+            decoded6d = prior.decode(prior.encode(pose6d)[0])
+        else:
+            decoded6d = reconstruct_in_windows(prior, pose6d, *window)
         eye = torch.eye(3, **to).expand(1, T, 3, 3)
-        decoded = with_root(pose6d_to_rotmats(prior.decode(mu)), eye)
+        decoded = with_root(pose6d_to_rotmats(decoded6d), eye)
         original = with_root(rotmats[:, :, 1:], eye)
         rest = body.rest_skeleton(torch.as_tensor(np.array(clip.phenotypes), **to)[None])
         zero = torch.zeros(1, T, 3, **to)

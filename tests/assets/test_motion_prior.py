@@ -99,6 +99,8 @@ def test_checkpoint_and_metric_rows(first_run):
         for metric in ("mpjpe_mm", "accel_error_mm_s2", "mpjpe_mm/views_2d", "accel_error_mm_s2/views_2d"):
             assert np.isfinite(rows[(method, metric)]) and rows[(method, metric)] > 0
     assert rows[("motion_prior", "train_seconds")] > 0
+    for metric in ("mpjpe_mm", "mpjpe_whole_clip_mm"):  # in the body fit's windows, and whole
+        assert np.isfinite(rows[("motion_prior", metric)]) and rows[("motion_prior", metric)] > 0
     assert table.set_index(["method", "metric"]).loc[("motion_prior", "accel_error_mm_s2"), "unit"] == "mm/s^2"
 
 

@@ -13,9 +13,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from humancal.detections import detections_to_dense
 from humancal.formats.errors import FormatError
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, NUM_JOINTS
-from humancal.long_tables import has_repeats, name_codes, unique_rows
 from humancal.tables import empty_table, validate_table
 
 __all__ = [
@@ -125,19 +125,13 @@ def detections_to_arrays(detections: pd.DataFrame, *, source: str = "") -> dict[
     table = validate_table(detections, "detections", source=source)
     if not len(table):
         return {}
-    j = name_codes(table["joint"], CANONICAL_JOINTS)
-    if (j < 0).any():
-        bad = sorted(set(table.loc[j < 0, "joint"]))
-        raise FormatError(source or None, "joint", f"canonical joint names {list(CANONICAL_JOINTS)}", f"{bad}")
-    keys = table[["frame", "view", "det_id"]].to_numpy(dtype=np.int64)
-    uniq, inverse = unique_rows(keys)
-    if has_repeats(inverse * NUM_JOINTS + j, len(uniq) * NUM_JOINTS):
-        raise FormatError(source or None, "joint", "each (frame, view, det_id, joint) at most once", "duplicated rows")
-    kp = np.full((len(uniq), NUM_JOINTS, 2), np.nan)
-    sc = np.zeros((len(uniq), NUM_JOINTS))
-    kp[inverse, j, 0] = table["x_px"].to_numpy()
-    kp[inverse, j, 1] = table["y_px"].to_numpy()
-    sc[inverse, j] = table["score"].to_numpy()
+    try:
+        dense = detections_to_dense(table)
+    except ValueError as err:  # a non-canonical joint name or a repeated (frame, view, det_id, joint)
+        raise FormatError(source or None, "joint", f"canonical joint names {list(CANONICAL_JOINTS)}, each "
+                          "(frame, view, det_id, joint) at most once", str(err)) from err
+    uniq = np.stack([dense.frame, dense.view, dense.det_id], axis=1)
+    kp, sc = dense.keypoints_px, dense.scores
     out: dict[tuple[int, int], ImageArrays] = {}
     image_keys = uniq[:, :2]
     starts = np.flatnonzero(np.r_[True, (image_keys[1:] != image_keys[:-1]).any(axis=1)])

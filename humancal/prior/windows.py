@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["WindowLayout", "window_layout"]
+__all__ = ["WindowLayout", "reconstruct_in_windows", "window_layout"]
 
 
 @dataclass(frozen=True)
@@ -104,3 +104,24 @@ def window_layout(num_frames: int, length: int, overlap: int) -> WindowLayout:
     return WindowLayout(num_frames, int(length), starts, owner, frames - starts[owner],
                         np.asarray(seam_a, np.int64).reshape(-1, 2) if seam_a else empty,
                         np.asarray(seam_b, np.int64).reshape(-1, 2) if seam_b else empty)
+
+
+def reconstruct_in_windows(prior, pose6d: Tensor, length: int, overlap: int) -> Tensor:
+    """Encode (posterior means) and decode a motion window by window, as the body fit applies the prior.
+
+    The recurrent prior is trained on short windows; long sequences are cut by :func:`window_layout` and each
+    frame's decoding is taken from its owner window.
+
+    Args:
+        prior: a :class:`~humancal.prior.model.MotionVAE`.
+        pose6d: (B, T, 21, 6) body poses (6D rotations).
+        length, overlap: the windows (:func:`window_layout`).
+
+    Returns:
+        (B, T, 21, 6) the decoded poses.
+    """
+    layout = window_layout(int(pose6d.shape[1]), length, overlap)
+    windows = layout.split(pose6d)  # (B, W, L, 21, 6)
+    B, W, L = windows.shape[:3]
+    mu, _ = prior.encode(windows.reshape(B * W, L, *windows.shape[3:]))
+    return layout.assemble(prior.decode(mu).reshape(B, W, L, *pose6d.shape[2:]))

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from humancal.fitting import window_layout
+from humancal.prior.windows import window_layout
 
 
 @pytest.mark.parametrize("frames,length,overlap", [(1, 64, 8), (64, 64, 8), (65, 64, 8), (300, 64, 8), (901, 48, 0)])
@@ -39,3 +39,24 @@ def test_bad_layouts_are_refused():
     for args in [(0, 64, 8), (100, 3, 0), (100, 16, 8), (100, 16, -1)]:
         with pytest.raises(ValueError, match="window_layout"):
             window_layout(*args)
+
+
+def test_reconstruction_in_windows_takes_each_frame_from_its_owner_window():
+    from humancal.prior import MotionVAE, PriorConfig
+    from humancal.prior.windows import reconstruct_in_windows
+
+    torch.manual_seed(0)
+    prior = MotionVAE(PriorConfig.tiny()).eval()
+    pose6d = torch.randn(2, 70, 21, 6)
+    with torch.no_grad():
+        out = reconstruct_in_windows(prior, pose6d, 32, 6)
+        layout = window_layout(70, 32, 6)
+        assert out.shape == pose6d.shape and layout.num_windows == 3
+        for t in (0, 25, 26, 40, 69):
+            w, offset = layout.owner_window[t], layout.owner_offset[t]
+            window = pose6d[:, layout.starts[w]:layout.starts[w] + 32]
+            expected = prior.decode(prior.encode(window)[0])[:, offset]
+            torch.testing.assert_close(out[:, t], expected)
+        # a short motion is one window: the same as decoding it whole
+        short = pose6d[:, :20]
+        torch.testing.assert_close(reconstruct_in_windows(prior, short, 32, 6), prior.decode(prior.encode(short)[0]))
