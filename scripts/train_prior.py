@@ -12,6 +12,7 @@ repository. ``--ship`` also writes the weights humancal ships (``humancal/weight
 how the shipped weights were made.
 
     python scripts/train_prior.py [--variant motion_prior] [--seed 0] [--threads 2] [--out /tmp/humancal_prior/x]
+                                  [--epochs N] [--steps-per-epoch N] [--learning-rate LR]
     python scripts/train_prior.py --ship            # retrain the shipped weights
 """
 
@@ -81,10 +82,11 @@ def main() -> None:
     )
     parser.add_argument("--epochs", type=int, help="override PriorConfig.epochs")
     parser.add_argument("--steps-per-epoch", type=int, help="override PriorConfig.steps_per_epoch")
+    parser.add_argument("--learning-rate", type=float, help="override PriorConfig.learning_rate (peak)")
     parser.add_argument("--ship", action="store_true",
                         help="also write the shipped weights (humancal/weights/motion_prior.*); default variant only")
     args = parser.parse_args()
-    if args.ship and (args.variant != "motion_prior" or args.epochs or args.steps_per_epoch):
+    if args.ship and (args.variant != "motion_prior" or args.epochs or args.steps_per_epoch or args.learning_rate):
         parser.error("--ship is for the default configuration of the motion_prior variant")
     out = (args.out or _DEFAULT_DIR / args.variant).resolve()
     if out.is_relative_to(REPO_ROOT):
@@ -97,7 +99,8 @@ def main() -> None:
     body_model = BodyModel()
     clips = _retargeted_clips(args.motions_table, body_model)
     held_out = tuple(args.held_out_subjects.split(","))
-    overrides = {k: v for k, v in (("epochs", args.epochs), ("steps_per_epoch", args.steps_per_epoch)) if v}
+    overrides = {k: v for k, v in (("epochs", args.epochs), ("steps_per_epoch", args.steps_per_epoch),
+                                   ("learning_rate", args.learning_rate)) if v}
     config = PriorConfig.default(args.variant, args.seed).replace(**overrides)
     print(f"{len(clips)} clips, {sum(len(c.bone_rotmats_local) for c in clips)} frames; held out: {list(held_out)}")
     print(f"config {config.digest()}: variant {config.variant}, hidden {config.hidden_size}, latent "
