@@ -1,9 +1,9 @@
 """How good the motion prior is on held-out subjects: reconstruction, and denoising / completion of corrupted clips.
 
 Reconstruction (:func:`reconstruction_report`): every held-out clip, cut into the windows the body fit decodes
-(:data:`RECONSTRUCTION_WINDOW`; or whole), encoded to its posterior means and decoded; the 23 canonical keypoints of the decoded and of the original pose are
-compared through the body model with the root at the identity orientation and the origin (the prior does not
-model the root), so the error is the body pose's alone.
+(:data:`RECONSTRUCTION_WINDOW`; or whole), encoded to its posterior means and decoded; the 23 canonical keypoints
+of the decoded and of the original pose are compared through the body model with the root at the identity
+orientation and the origin (the prior does not model the root), so the error is the body pose's alone.
 
 Denoising and completion (:func:`denoising_benchmark`): fixed segments of held-out clips
 (:func:`motion_segments`, each moved so that its mean root position is above the origin) are corrupted,
@@ -64,8 +64,8 @@ log = logging.getLogger(__name__)
 
 RECONSTRUCTION_WINDOW = (32, 6)
 """(frames, overlap) of the windows the reconstruction cuts clips into: those of the body fit
-(``BodyFitConfig.window_frames``, ``window_overlap``), the way the product applies the prior. The prior is trained
-on 16-frame windows; decoded whole, clips of hundreds of frames come out worse (``docs/motion_prior.md``)."""
+(``BodyFitConfig.window_frames``, ``window_overlap``), the way the product applies the prior. A prior trained on
+16-frame windows may decode clips of hundreds of frames worse whole than in windows (``docs/motion_prior.md``)."""
 DENOISE_NOISE_M = 0.03
 """Standard deviation of the 3D keypoint noise, metres per coordinate."""
 DENOISE_MISSING = 0.2
@@ -140,7 +140,6 @@ def _errors(pred_m: np.ndarray, gt_m: np.ndarray, fps: float) -> dict[str, float
 # ---------------------------------------------------------------------------------------------------- reconstruction
 
 
-@torch.no_grad()
 @torch.no_grad()
 def reconstruction_report(prior: MotionVAE, clips: Sequence[RetargetedClip], body: BodyModel,
                           window: tuple[int, int] | None = RECONSTRUCTION_WINDOW) -> dict[str, float]:

@@ -118,6 +118,12 @@ def test_segments_are_deterministic_centred_and_need_long_clips(body_model):
         motion_segments(clips, frames=50)
 
 
+def test_the_reconstruction_windows_are_the_body_fits():
+    from humancal.fitting import BodyFitConfig
+
+    assert RECONSTRUCTION_WINDOW == (BodyFitConfig().window_frames, BodyFitConfig().window_overlap)
+
+
 def test_reconstruction_is_exact_through_an_identity_autoencoder(body_model):
     clips = [_clip(body_model, "02_01", 12, 0), _clip(body_model, "14_01", 7, 1), _clip(body_model, "14_02", 75, 2)]
     for window in (RECONSTRUCTION_WINDOW, None):  # 75 frames: three windows of 32
