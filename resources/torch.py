@@ -21,10 +21,11 @@ class TorchResource(dg.ConfigurableResource):
     """
 
     device: str = Field(default="cpu", description="torch device the networks run on: 'cpu', 'cuda', 'cuda:1', ...")
-    threads: int = Field(
-        default=1,
-        description="torch intra-op threads (on a 2-core machine shared with other work, one thread lifted about 1.5 "
-                    "times faster than two)",
+    threads: int | None = Field(
+        default=None,
+        description="torch intra-op threads; None: torch's own setting (one per physical core unless "
+                    "OMP_NUM_THREADS says otherwise; on an idle 2-core machine the benchmark graph took 135 s with two "
+                    "threads and 170 s with one; on a machine busy with other work one thread can be the faster)",
     )
     seed: int = Field(default=0, description="seed of torch's global generator while an asset runs")
 
@@ -49,12 +50,13 @@ class TorchResource(dg.ConfigurableResource):
         Raises:
             ValueError: ``threads`` < 1, or see :meth:`torch_device`.
         """
-        if self.threads < 1:
-            raise ValueError(f"TorchResource.threads={self.threads} must be >= 1")
+        if self.threads is not None and self.threads < 1:
+            raise ValueError(f"TorchResource.threads={self.threads} must be >= 1 (or None: torch's own setting)")
         device = self.torch_device()
         threads = torch.get_num_threads()
         rng_state = torch.random.get_rng_state()
-        torch.set_num_threads(self.threads)
+        if self.threads is not None:
+            torch.set_num_threads(self.threads)
         torch.manual_seed(self.seed)
         try:
             yield device

@@ -13,7 +13,7 @@ inputs and ground truth nor the references computed from them), and the wall tim
 The performance target (``shared/DESIGN.md`` section 7) is the reference workload, ``synthetic__benchmark``
 (900 frames, 5 views, 4 people: the default); ``synthetic__demo`` is the same scene size over 300 frames. Restrict
 the process to two cores to measure against the 2-core target: ``taskset -c 0,1 python scripts/bench_graph.py``.
-torch uses the threads of the ``torch_runtime`` resource (1 by default).
+torch uses the threads of the ``torch_runtime`` resource (by default torch's own setting: one per physical core).
 """
 
 import argparse
@@ -34,7 +34,7 @@ def _parse(argv):
     parser.add_argument("--with-method-tables", action="store_true",
                         help="also time method_tables (the paper's other regimes: several full fits), in a second run")
     parser.add_argument("--threads", type=int, default=None,
-                        help="torch intra-op threads (the torch_runtime resource; default: its default, 1)")
+                        help="torch intra-op threads (the torch_runtime resource; default: torch's own setting, one per physical core)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep the state dir here (artifacts and the instance) instead of a temporary one")
     return parser.parse_args(argv)

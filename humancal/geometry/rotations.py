@@ -111,7 +111,17 @@ def sixd_to_rotmat(sixd: Array) -> Array:
         (..., 3, 3) rotation matrices whose first column is the normalised first input column.
     """
     _check_last(sixd, (3, 2), "sixd")
-    return _torch_op(roma.special_gramschmidt, sixd)
+    return _torch_op(_gram_schmidt_columns_contiguous, sixd)
+
+
+def _gram_schmidt_columns_contiguous(sixd: torch.Tensor) -> torch.Tensor:
+    """``roma.special_gramschmidt`` on a copy whose columns are contiguous in memory.
+
+    roma reads the two columns as strided views of a row-major (..., 3, 2) tensor; torch's norm over such a view
+    takes a slow path (on 3,600 person-frames x 21 bones, the body fit's batch, the forward and backward passes
+    took 31 ms instead of 17 ms at 2 threads). The values are the same; only the layout changes.
+    """
+    return roma.special_gramschmidt(sixd.transpose(-1, -2).contiguous().transpose(-1, -2))
 
 
 def project_to_rotmat(M: Array) -> Array:

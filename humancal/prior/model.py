@@ -24,10 +24,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import roma
 import torch
 from torch import Tensor, nn
 
+from humancal.geometry.rotations import sixd_to_rotmat
 from humancal.prior.config import NUM_PRIOR_BONES, PriorConfig
 
 __all__ = [
@@ -71,7 +71,7 @@ def pose6d_to_rotmats(pose6d: Tensor) -> Tensor:
     """
     if pose6d.shape[-1] != 6:
         raise ValueError(f"pose6d must have shape (..., 6), got {tuple(pose6d.shape)}")
-    return roma.special_gramschmidt(pose6d.reshape(*pose6d.shape[:-1], 3, 2))
+    return sixd_to_rotmat(pose6d.reshape(*pose6d.shape[:-1], 3, 2))
 
 
 def identity_pose6d(dtype: torch.dtype = torch.float32, device: torch.device | str = "cpu") -> Tensor:

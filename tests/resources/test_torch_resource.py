@@ -21,6 +21,17 @@ def test_threads_and_seed_are_applied_and_restored():
         assert torch.equal(torch.rand(3), inside)  # same seed, same draws
 
 
+def test_default_threads_leave_torch_setting():
+    before = torch.get_num_threads()
+    torch.set_num_threads(before + 1)
+    try:
+        with TorchResource().applied():
+            assert torch.get_num_threads() == before + 1
+        assert torch.get_num_threads() == before + 1
+    finally:
+        torch.set_num_threads(before)
+
+
 def test_restored_when_the_block_raises():
     before = torch.get_num_threads()
     with pytest.raises(RuntimeError, match="boom"):

@@ -108,6 +108,19 @@ def test_6d_round_trip_and_convention():
     torch.testing.assert_close(pose6d_to_rotmats(identity_pose6d()), torch.eye(3).expand(21, 3, 3))
 
 
+
+def test_6d_of_any_input_is_roma_gram_schmidt_with_gradients():
+    # the conversion copies the columns to a contiguous layout for speed; the values must be roma's
+    sixd = torch.randn(4, 7, 21, 6, dtype=torch.float64, generator=torch.Generator().manual_seed(1), requires_grad=True)
+    ours = pose6d_to_rotmats(sixd)
+    theirs = roma.special_gramschmidt(sixd.reshape(4, 7, 21, 3, 2))
+    torch.testing.assert_close(ours, theirs, atol=1e-12, rtol=0)
+    weights = torch.randn_like(ours)
+    (g_ours,) = torch.autograd.grad((ours * weights).sum(), sixd)
+    (g_theirs,) = torch.autograd.grad((theirs * weights).sum(), sixd)
+    torch.testing.assert_close(g_ours, g_theirs, atol=1e-10, rtol=0)
+
+
 def test_with_root():
     bones = torch.eye(3).expand(2, 5, 21, 3, 3)
     root = roma.rotvec_to_rotmat(torch.randn(2, 5, 3))
