@@ -19,6 +19,8 @@ local-linear term / with one-directional GRUs / without the skip connection (onl
 
 ``int_ext_known_pp`` is not one of the paper's rows: it measures what the principal point, which every other
 self-calibrated row holds at the image centre, costs on this sequence (ground truth in a diagnostic row only).
+``bundle_int_ext`` is not one of them either: the init cameras bundle-adjusted as for ``separate``, then refined
+with the bodies as for ``int_ext`` (both steps in sequence; a candidate for the pipeline's own schedule).
 
 Every method gets the rows of :func:`evaluation.body_metrics.camera_and_body_rows`: the body rows, its fitted
 keypoints' reprojection error named ``fit_reprojection_error_px`` (``reprojection_error_px`` is the camera row's name).
@@ -67,6 +69,7 @@ METHODS: dict[str, Method] = {
     "gt_cameras": Method("gt", "fixed"),
     "init": Method("init", "fixed"),
     "separate": Method("bundle", "fixed"),
+    "bundle_int_ext": Method("bundle", "int_ext"),
     "per_frame_prior": Method("init", "int_ext", "per_frame"),
     "no_prior": Method("init", "int_ext", None),
     "no_local_linear": Method("init", "int_ext", "no_local_linear"),
