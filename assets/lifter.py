@@ -94,9 +94,9 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
                     f"({record['elapsed_s']:.0f} s)"
                 )
 
-        # Training runs on the CPU with the resource's threads (torch's own setting by default, one per physical core; on a 2-core machine
-        # shared with other work, one thread can be the faster: set them); the training's own randomness comes from
-        # config.seed.
+        # Training runs on the CPU with the resource's threads (by default torch's own setting, one per physical
+        # core; on a 2-core machine shared with other work one thread can be the faster: set them); the training's
+        # own randomness comes from config.seed.
         with torch_runtime.applied():
             checkpoint, history = train_lifter(train, val, config, progress=progress)
         final = checkpoint["val_metrics"]

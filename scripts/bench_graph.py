@@ -34,7 +34,8 @@ def _parse(argv):
     parser.add_argument("--with-method-tables", action="store_true",
                         help="also time method_tables (the paper's other regimes: several full fits), in a second run")
     parser.add_argument("--threads", type=int, default=None,
-                        help="torch intra-op threads (the torch_runtime resource; default: torch's own setting, one per physical core)")
+                        help="torch intra-op threads (the torch_runtime resource; default: torch's own setting, "
+                             "one per physical core)")
     parser.add_argument("--keep", type=Path, default=None,
                         help="keep the state dir here (artifacts and the instance) instead of a temporary one")
     return parser.parse_args(argv)

@@ -108,7 +108,6 @@ def test_6d_round_trip_and_convention():
     torch.testing.assert_close(pose6d_to_rotmats(identity_pose6d()), torch.eye(3).expand(21, 3, 3))
 
 
-
 def test_6d_of_any_input_is_roma_gram_schmidt_with_gradients():
     # the conversion copies the columns to a contiguous layout for speed; the values must be roma's
     sixd = torch.randn(4, 7, 21, 6, dtype=torch.float64, generator=torch.Generator().manual_seed(1), requires_grad=True)
