@@ -396,3 +396,91 @@ def test_stitching_joins_only_the_same_body_within_reach():
     assert set(run(body, 60, [4.0, 0.0, 0.0])) == {0, 1}  # 4 m in 1 s: too far to walk
     assert set(run(body, 30 + 25 * 30, 0.0)) == {0, 1}  # back after 25 s: beyond the 20 s window
     assert set(run(body, 60, 0.0, TrackingConfig(fps=fps, stitch_window_s=0.0))) == {0, 1}  # stitching off
+
+
+def test_a_person_split_into_two_clusters_is_merged():
+    """Unit rule of the merge: two clusters of one frame without a common view are merged when their skeletons lie
+    together, a mirrored one included (detections with left and right swapped in two views), and the larger one
+    reprojects onto the smaller one's detections; a cluster of another person 0.6 m away is not merged."""
+    from humancal.association.cycle_matching import FrameMatching
+    from humancal.association.tracking import _merge_split_clusters
+    from humancal.keypoints import FLIP_INDEX
+
+    rng = np.random.default_rng(1)
+    cameras = []
+    for v in range(6):
+        angle = 2 * np.pi * v / 6
+        centre = np.array([6 * np.cos(angle), 6 * np.sin(angle), 2.5])
+        z = -centre / np.linalg.norm(centre)
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        x /= np.linalg.norm(x)
+        K = np.array([[1200.0, 0, 960], [0, 1200, 540], [0, 0, 1]])
+        cameras.append(Camera.from_center(K, np.stack([x, np.cross(z, x), z]), centre, 1920, 1080))
+    body = rng.normal(0, 0.25, (NUM_JOINTS, 3)) + [0.0, 0.0, 1.0]
+    other = body + [0.6, 0.0, 0.0]
+    assert np.median(np.linalg.norm(body - body[list(FLIP_INDEX)], axis=-1)) > 0.4  # mirrored: not close as it is
+
+    def seen(points, v, flipped=False):
+        px = cameras[v].P @ np.c_[points, np.ones(NUM_JOINTS)].T
+        px = (px[:2] / px[2]).T + rng.normal(0, 1.0, (NUM_JOINTS, 2))
+        return px[list(FLIP_INDEX)] if flipped else px
+
+    def run(second, flipped):
+        """Person A in views 0-3 (cluster 0) and ``second`` in views 4-5 (cluster 1): merged?"""
+        view = np.array([0, 1, 2, 3, 4, 5])
+        keypoints = np.stack([seen(body, v) for v in range(4)] + [seen(second, v, flipped) for v in (4, 5)])
+        scores = np.ones((6, NUM_JOINTS))
+        cluster = np.array([0, 0, 0, 0, 1, 1])
+        joints, _ = triangulate_clusters(cluster, 2, view, keypoints, scores, cameras, 25.0)
+        matchings = [FrameMatching(cluster.copy(), np.eye(6), np.zeros((6, 6)), 0.0, 0, True)]
+        merges = _merge_split_clusters(matchings, np.array([0, 6]), cluster, np.array([0, 0]), joints, view,
+                                       keypoints, scores, cameras, TrackingConfig())
+        return merges, matchings[0].cluster
+
+    merges, labels = run(body, flipped=True)  # A's detections with left and right swapped in views 4 and 5
+    assert merges == 1 and (labels == 0).all()
+    merges, labels = run(body, flipped=False)
+    assert merges == 1 and (labels == 0).all()
+    merges, labels = run(other, flipped=False)  # someone else, 0.6 m away: two people
+    assert merges == 0 and list(labels) == [0, 0, 0, 0, 1, 1]
+
+
+def test_a_lone_detection_joins_the_cluster_it_fits():
+    """Unit rule of the completion: a detection no cluster took joins the one cluster of its frame that lacks its
+    view and reprojects onto it (left and right swapped or not); another person's stays alone."""
+    from humancal.association.cycle_matching import FrameMatching
+    from humancal.association.tracking import _complete_clusters
+    from humancal.keypoints import FLIP_INDEX
+
+    rng = np.random.default_rng(2)
+    cameras = []
+    for v in range(5):
+        angle = 2 * np.pi * v / 5
+        centre = np.array([6 * np.cos(angle), 6 * np.sin(angle), 2.5])
+        z = -centre / np.linalg.norm(centre)
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        x /= np.linalg.norm(x)
+        K = np.array([[1200.0, 0, 960], [0, 1200, 540], [0, 0, 1]])
+        cameras.append(Camera.from_center(K, np.stack([x, np.cross(z, x), z]), centre, 1920, 1080))
+    body = rng.normal(0, 0.25, (NUM_JOINTS, 3)) + [0.0, 0.0, 1.0]
+
+    def seen(points, v, flipped=False):
+        px = cameras[v].P @ np.c_[points, np.ones(NUM_JOINTS)].T
+        px = (px[:2] / px[2]).T + rng.normal(0, 1.0, (NUM_JOINTS, 2))
+        return px[list(FLIP_INDEX)] if flipped else px
+
+    def run(lone_points, lone_view, flipped):
+        view = np.array([0, 1, 2, 3, lone_view])
+        keypoints = np.stack([seen(body, v) for v in range(4)] + [seen(lone_points, lone_view, flipped)])
+        scores = np.ones((5, NUM_JOINTS))
+        cluster = np.array([0, 0, 0, 0, -1])
+        joints, _ = triangulate_clusters(cluster, 1, view, keypoints, scores, cameras, 25.0)
+        matchings = [FrameMatching(cluster.copy(), np.eye(5), np.zeros((5, 5)), 0.0, 0, True)]
+        grown = _complete_clusters(matchings, np.array([0, 5]), cluster, np.array([0]), joints, view, keypoints,
+                                   scores, cameras, TrackingConfig())
+        return grown.tolist(), matchings[0].cluster[-1]
+
+    assert run(body, 4, flipped=True) == ([0], 0)  # the person's detection with left and right swapped
+    assert run(body, 4, flipped=False) == ([0], 0)
+    assert run(body + [0.6, 0.0, 0.0], 4, flipped=False) == ([], -1)  # someone else
+    assert run(body, 2, flipped=False) == ([], -1)  # the cluster has a detection of that view already
