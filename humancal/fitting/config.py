@@ -12,7 +12,7 @@ _INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iteratio
                    "iterations_cameras", "rounds")
 _CHOICE_FIELDS = {"cameras": ("fixed", "ext", "int_ext"),  # humancal.fitting.cameras.CAMERA_REGIMES
                   "latent_start": ("prior_mean", "reference_pose")}
-_BOOL_FIELDS = ("fit_shape", "refine_k1")
+_BOOL_FIELDS = ("fit_shape", "refine_k1", "unswap_left_right")
 
 
 @dataclass(frozen=True)
@@ -65,6 +65,9 @@ class BodyFitConfig:
         weight_interpenetration: weight of the sphere-proxy interpenetration penalty between people
             (``humancal.fitting.contact``; squared overlap depth in units of ``contact_scale_m``).
         contact_scale_m: the overlap depth that costs one unit, metres.
+        unswap_left_right: whether detections whose left and right joints the detector swapped are swapped back
+            before the fit (:func:`humancal.fitting.observations.unswap_left_right`, against the triangulated
+            joints through the initial cameras; ``noise_px`` is the error below which a detection is left alone).
     """
 
     noise_px: float = 15.0
@@ -95,6 +98,7 @@ class BodyFitConfig:
     camera_prior_scale_m: float = 0.1
     weight_interpenetration: float = 0.0
     contact_scale_m: float = 0.01
+    unswap_left_right: bool = True
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -54,7 +54,7 @@ from humancal.fitting.cameras import CameraVariables
 from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.contact import interpenetration
 from humancal.fitting.motions import FittedMotions
-from humancal.fitting.observations import BodyObservations, FittingInputError
+from humancal.fitting.observations import BodyObservations, FittingInputError, unswap_left_right
 from humancal.lifter.pose_cues import standing_score
 from humancal.prior.config import NUM_PRIOR_BONES
 from humancal.prior.fitting import KeypointObservations, initial_root
@@ -369,6 +369,9 @@ def fit_bodies(
         raise FittingInputError("body fit: no detected keypoint with a score > 0 among the associated detections")
     seconds: dict[str, float] = {}
     start = time.perf_counter()
+    if config.unswap_left_right:
+        observations, swapped = unswap_left_right(observations, rig, min_error_px=config.noise_px)
+        log.info("body fit: %d detection(s) with left and right swapped back", swapped)
     if prior is not None:
         prior = prior.to(dtype=body.dtype, device=body.device).eval()
     problem = _Problem(body, observations, rig, prior, config)

@@ -7,16 +7,17 @@ fit is one batched computation; absent observations have confidence 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 
 from humancal.associations import Associations
+from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
-from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
+from humancal.keypoints import FLIP_INDEX, JOINT_INDEX, NUM_JOINTS
 
-__all__ = ["BodyObservations", "FittingInputError", "body_observations"]
+__all__ = ["BodyObservations", "FittingInputError", "body_observations", "unswap_left_right"]
 
 
 class FittingInputError(ValueError):
@@ -158,3 +159,57 @@ def body_observations(detections: DenseDetections, associations: pd.DataFrame, s
         raise FittingInputError(f"skeletons3d: persons {no_3d} have no valid triangulated joint: a body cannot be "
                                 f"placed without one")
     return BodyObservations(person_ids, frames, keypoints, confidence, joints, joints_valid, present), warnings
+
+
+MIN_SWAP_JOINTS = 6
+"""Joints a detection must share with its person's triangulated joints to be compared with them."""
+
+
+def unswap_left_right(observations: BodyObservations, rig: CameraRig, *, min_error_px: float = 15.0,
+                      ratio: float = 0.5) -> tuple[BodyObservations, int]:
+    """Swap back the left and right joints of the detections the detector mirrored.
+
+    A detector sometimes labels a person's left joints as right and the other way round. The association keeps
+    such a detection with its person (the triangulation drops its swapped joints view by view), but a body fit
+    would be pulled toward the mirrored pose. A detection is swapped back when, against its person's triangulated
+    joints projected by ``rig``, its median reprojection error is above ``min_error_px`` as it is and below
+    ``ratio`` times that with its left and right joints swapped (median over the joints it shares with the
+    triangulated ones, at least ``MIN_SWAP_JOINTS``).
+
+    Args:
+        observations: the people's detections and triangulated joints (:func:`body_observations`).
+        rig: the V cameras of the detections.
+        min_error_px: a detection closer than this as it is is left alone, pixels.
+        ratio: how much closer the swapped detection must be, in (0, 1).
+
+    Returns:
+        The observations with those detections swapped, and how many were.
+    """
+    if not 0.0 < ratio < 1.0:
+        raise ValueError(f"unswap_left_right: ratio must lie in (0, 1), got {ratio}")
+    V, P, T = observations.confidence.shape[:3]
+    if V != len(rig):
+        raise FittingInputError(f"unswap_left_right: detections of {V} views, but {len(rig)} cameras")
+    projected, _ = rig.project(observations.joints_world_m.reshape(-1, 3))  # (V, P*T*23, 2)
+    projected = projected.reshape(V, P, T, NUM_JOINTS, 2)
+    flip = list(FLIP_INDEX)
+
+    def median_error(points: np.ndarray, confidence: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        shared = (confidence > 0) & observations.joints_valid[None] & np.isfinite(projected).all(-1)
+        error = np.where(shared, np.linalg.norm(projected - points, axis=-1), np.nan)
+        enough = shared.sum(-1) >= MIN_SWAP_JOINTS
+        out = np.full(enough.shape, np.nan)
+        out[enough] = np.nanmedian(error[enough], axis=-1)
+        return out, enough
+
+    as_is, enough = median_error(observations.keypoints_px, observations.confidence)
+    swapped, enough_swapped = median_error(observations.keypoints_px[..., flip, :],
+                                           observations.confidence[..., flip])
+    swap = enough & enough_swapped & (as_is > min_error_px) & (swapped < ratio * as_is)
+    if not swap.any():
+        return observations, 0
+    keypoints = observations.keypoints_px.copy()
+    confidence = observations.confidence.copy()
+    keypoints[swap] = keypoints[swap][:, flip]
+    confidence[swap] = confidence[swap][:, flip]
+    return replace(observations, keypoints_px=keypoints, confidence=confidence), int(swap.sum())

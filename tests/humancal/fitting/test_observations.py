@@ -63,3 +63,39 @@ def test_bad_inputs_raise_clear_errors():
         body_observations(detections, _associations(rows, people), _skeletons({}), num_views=2)
     with pytest.raises(FittingInputError, match=r"view numbers must be 0..0"):
         body_observations(detections, _associations(rows, people), _skeletons({0: range(5)}), num_views=1)
+
+
+def test_detections_with_left_and_right_swapped_are_swapped_back():
+    from humancal.camera import Camera, CameraRig
+    from humancal.fitting import BodyObservations
+    from humancal.fitting.observations import unswap_left_right
+    from humancal.keypoints import FLIP_INDEX
+
+    rng = np.random.default_rng(0)
+    cameras = []
+    for v in range(3):
+        angle = 2 * np.pi * v / 3
+        centre = np.array([4 * np.cos(angle), 4 * np.sin(angle), 2.0])
+        z = -centre / np.linalg.norm(centre)
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        x /= np.linalg.norm(x)
+        K = np.array([[1000.0, 0, 640], [0, 1000, 360], [0, 0, 1]])
+        cameras.append(Camera.from_center(K, np.stack([x, np.cross(z, x), z]), centre, 1280, 720))
+    rig = CameraRig.from_cameras(cameras)
+    joints = rng.normal(0, 0.3, (1, 4, 23, 3)) + [0.0, 0.0, 1.0]  # one person, four frames
+    pixels, _ = rig.project(joints.reshape(-1, 3))
+    keypoints = pixels.reshape(3, 1, 4, 23, 2) + rng.normal(0, 1.0, (3, 1, 4, 23, 2))
+    keypoints[1, 0, 2] = keypoints[1, 0, 2][list(FLIP_INDEX)]  # view 1 saw frame 2 mirrored
+    confidence = np.full((3, 1, 4, 23), 0.9)
+    confidence[2, 0, 3] = 0.0  # view 2 missed frame 3
+    obs = BodyObservations(np.array([0]), np.arange(4), keypoints, confidence, joints, np.ones((1, 4, 23), bool),
+                           np.ones((1, 4), bool))
+    fixed, swapped = unswap_left_right(obs, rig)
+    assert swapped == 1
+    error = np.linalg.norm(fixed.keypoints_px - pixels.reshape(3, 1, 4, 23, 2), axis=-1)
+    assert error.max() < 6.0  # every detection agrees with the joints again
+    assert np.array_equal(fixed.confidence, obs.confidence)  # uniform confidences: swapping keeps them
+    again, swapped_again = unswap_left_right(fixed, rig)
+    assert swapped_again == 0 and again is fixed
+    with pytest.raises(ValueError, match="ratio"):
+        unswap_left_right(obs, rig, ratio=1.5)
