@@ -18,7 +18,7 @@ from humancal.association.plot import plot_association
 from humancal.camera import CameraRig
 from humancal.lifter import lifted_from_table
 
-CODE_VERSION = "3"
+CODE_VERSION = "4"
 
 _OUTPUTS = {
     "associations": ("associations", "The person id of every detection (-1: rejected as a false positive), matched "

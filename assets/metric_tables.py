@@ -26,7 +26,7 @@ from resources.datasets import DatasetsResource
 from resources.torch import TorchResource
 
 
-@sequence_asset("metrics", code_version="14")
+@sequence_asset("metrics", code_version="15")
 def metric_tables(
     context: dg.AssetExecutionContext,
     config: BodyFitSettings,
