@@ -11,10 +11,11 @@ from humancal.association import SKELETONS3D_SCHEMA, TrackingConfig, associate, 
 from humancal.association import to_skeletons_table
 from humancal.association.cluster_triangulation import triangulate_clusters
 from humancal.association.track_smoothing import SmoothingConfig
-from humancal.camera import Camera, CameraRig
+from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import NUM_JOINTS
+from tests.cameras import ring_of_cameras
 
 # --- metric helpers (identity metrics of the evaluation package come later; these stay here) --------------------
 
@@ -219,15 +220,7 @@ def test_without_lifted_poses(scene3):
 
 def test_triangulation_agrees_with_triangulate_dlt():
     rng = np.random.default_rng(0)
-    cameras = []
-    for v in range(5):
-        angle = 2 * np.pi * v / 5
-        centre = np.array([5 * np.cos(angle), 5 * np.sin(angle), 2.5])
-        z = -centre / np.linalg.norm(centre)
-        x = np.cross(z, [0.0, 0.0, 1.0])
-        x /= np.linalg.norm(x)
-        K = np.array([[1200.0, 0, 960], [0, 1200, 540], [0, 0, 1]])
-        cameras.append(Camera.from_center(K, np.stack([x, np.cross(z, x), z]), centre, 1920, 1080))
+    cameras = ring_of_cameras(5, radius_m=5.0, height_m=2.5)
     C = 40
     points = rng.normal(size=(C, NUM_JOINTS, 3)) * [0.5, 0.5, 0.5] + [0, 0, 1]
     pixels = np.stack([np.stack([c.P @ np.r_[p, 1] for p in points.reshape(-1, 3)]) for c in cameras])
@@ -407,15 +400,7 @@ def test_a_person_split_into_two_clusters_is_merged():
     from humancal.keypoints import FLIP_INDEX
 
     rng = np.random.default_rng(1)
-    cameras = []
-    for v in range(6):
-        angle = 2 * np.pi * v / 6
-        centre = np.array([6 * np.cos(angle), 6 * np.sin(angle), 2.5])
-        z = -centre / np.linalg.norm(centre)
-        x = np.cross(z, [0.0, 0.0, 1.0])
-        x /= np.linalg.norm(x)
-        K = np.array([[1200.0, 0, 960], [0, 1200, 540], [0, 0, 1]])
-        cameras.append(Camera.from_center(K, np.stack([x, np.cross(z, x), z]), centre, 1920, 1080))
+    cameras = ring_of_cameras(6, radius_m=6.0, height_m=2.5)
     body = rng.normal(0, 0.25, (NUM_JOINTS, 3)) + [0.0, 0.0, 1.0]
     other = body + [0.6, 0.0, 0.0]
     assert np.median(np.linalg.norm(body - body[list(FLIP_INDEX)], axis=-1)) > 0.4  # mirrored: not close as it is
@@ -453,15 +438,7 @@ def test_a_lone_detection_joins_the_cluster_it_fits():
     from humancal.keypoints import FLIP_INDEX
 
     rng = np.random.default_rng(2)
-    cameras = []
-    for v in range(5):
-        angle = 2 * np.pi * v / 5
-        centre = np.array([6 * np.cos(angle), 6 * np.sin(angle), 2.5])
-        z = -centre / np.linalg.norm(centre)
-        x = np.cross(z, [0.0, 0.0, 1.0])
-        x /= np.linalg.norm(x)
-        K = np.array([[1200.0, 0, 960], [0, 1200, 540], [0, 0, 1]])
-        cameras.append(Camera.from_center(K, np.stack([x, np.cross(z, x), z]), centre, 1920, 1080))
+    cameras = ring_of_cameras(5, radius_m=6.0, height_m=2.5)
     body = rng.normal(0, 0.25, (NUM_JOINTS, 3)) + [0.0, 0.0, 1.0]
 
     def seen(points, v, flipped=False):

@@ -66,22 +66,15 @@ def test_bad_inputs_raise_clear_errors():
 
 
 def test_detections_with_left_and_right_swapped_are_swapped_back():
-    from humancal.camera import Camera, CameraRig
+    from humancal.camera import CameraRig
     from humancal.fitting import BodyObservations
     from humancal.fitting.observations import unswap_left_right
     from humancal.keypoints import FLIP_INDEX
+    from tests.cameras import ring_of_cameras
 
     rng = np.random.default_rng(0)
-    cameras = []
-    for v in range(3):
-        angle = 2 * np.pi * v / 3
-        centre = np.array([4 * np.cos(angle), 4 * np.sin(angle), 2.0])
-        z = -centre / np.linalg.norm(centre)
-        x = np.cross(z, [0.0, 0.0, 1.0])
-        x /= np.linalg.norm(x)
-        K = np.array([[1000.0, 0, 640], [0, 1000, 360], [0, 0, 1]])
-        cameras.append(Camera.from_center(K, np.stack([x, np.cross(z, x), z]), centre, 1280, 720))
-    rig = CameraRig.from_cameras(cameras)
+    rig = CameraRig.from_cameras(ring_of_cameras(3, radius_m=4.0, height_m=2.0, focal_px=1000.0, width_px=1280,
+                                                 height_px=720))
     joints = rng.normal(0, 0.3, (1, 4, 23, 3)) + [0.0, 0.0, 1.0]  # one person, four frames
     pixels, _ = rig.project(joints.reshape(-1, 3))
     keypoints = pixels.reshape(3, 1, 4, 23, 2) + rng.normal(0, 1.0, (3, 1, 4, 23, 2))
