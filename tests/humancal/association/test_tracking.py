@@ -396,7 +396,7 @@ def test_a_person_split_into_two_clusters_is_merged():
     together, a mirrored one included (detections with left and right swapped in two views), and the larger one
     reprojects onto the smaller one's detections; a cluster of another person 0.6 m away is not merged."""
     from humancal.association.cycle_matching import FrameMatching
-    from humancal.association.tracking import _merge_split_clusters
+    from humancal.association.cluster_repair import merge_split_clusters
     from humancal.keypoints import FLIP_INDEX
 
     rng = np.random.default_rng(1)
@@ -418,8 +418,10 @@ def test_a_person_split_into_two_clusters_is_merged():
         cluster = np.array([0, 0, 0, 0, 1, 1])
         joints, _ = triangulate_clusters(cluster, 2, view, keypoints, scores, cameras, 25.0)
         matchings = [FrameMatching(cluster.copy(), np.eye(6), np.zeros((6, 6)), 0.0, 0, True)]
-        merges = _merge_split_clusters(matchings, np.array([0, 6]), cluster, np.array([0, 0]), joints, view,
-                                       keypoints, scores, cameras, TrackingConfig())
+        config = TrackingConfig()  # the defaults
+        merges = merge_split_clusters(matchings, np.array([0, 6]), cluster, np.array([0, 0]), joints, view,
+                                      keypoints, scores, cameras, distance_m=config.merge_distance_m,
+                                      threshold_px=config.outlier_threshold_px)
         return merges, matchings[0].cluster
 
     merges, labels = run(body, flipped=True)  # A's detections with left and right swapped in views 4 and 5
@@ -434,7 +436,7 @@ def test_a_lone_detection_joins_the_cluster_it_fits():
     """Unit rule of the completion: a detection no cluster took joins the one cluster of its frame that lacks its
     view and reprojects onto it (left and right swapped or not); another person's stays alone."""
     from humancal.association.cycle_matching import FrameMatching
-    from humancal.association.tracking import _complete_clusters
+    from humancal.association.cluster_repair import complete_clusters
     from humancal.keypoints import FLIP_INDEX
 
     rng = np.random.default_rng(2)
@@ -453,8 +455,8 @@ def test_a_lone_detection_joins_the_cluster_it_fits():
         cluster = np.array([0, 0, 0, 0, -1])
         joints, _ = triangulate_clusters(cluster, 1, view, keypoints, scores, cameras, 25.0)
         matchings = [FrameMatching(cluster.copy(), np.eye(5), np.zeros((5, 5)), 0.0, 0, True)]
-        grown = _complete_clusters(matchings, np.array([0, 5]), cluster, np.array([0]), joints, view, keypoints,
-                                   scores, cameras, TrackingConfig())
+        grown = complete_clusters(matchings, np.array([0, 5]), cluster, np.array([0]), joints, view, keypoints,
+                                  scores, cameras, threshold_px=TrackingConfig().outlier_threshold_px)
         return grown.tolist(), matchings[0].cluster[-1]
 
     assert run(body, 4, flipped=True) == ([0], 0)  # the person's detection with left and right swapped
