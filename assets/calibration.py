@@ -151,7 +151,7 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
 
 @sequence_asset(
     "cameras",
-    code_version="5",
+    code_version="6",
     check_specs=[
         dg.AssetCheckSpec("cameras_valid", asset="extrinsics", blocking=True,
                           description="finite positive focal, principal point inside, right-handed rotations"),
@@ -203,6 +203,7 @@ def extrinsics(
         up_source=floor.up_source if floor is not None else "none",
         up_std_deg=float(floor.up_std_deg) if floor is not None else float("nan"),
         body_size_ratio=float(result.diagnostics.body_size_ratio),
+        mismatched_detections=int(result.diagnostics.mismatched_detections),
     )
     rig = check_rig_geometry(table, people, floor_known=floor is not None)
     for name, report in (("cameras_valid", check_cameras_valid(table)), ("focal_plausible", check_focal_plausible(table)),

@@ -122,6 +122,9 @@ class ExtrinsicsSettings(dg.Config):
     fov_range_deg: list[float] = library_field(_E, "fov_range_deg")
     blind_start_fov_deg: list[float] = library_field(_E, "blind_start_fov_deg")
     blind_start_iterations: int = library_field(_E, "blind_start_iterations")
+    mismatch_threshold_sigma: float = library_field(_E, "mismatch_threshold_sigma")
+    mismatch_max_fraction: float = library_field(_E, "mismatch_max_fraction")
+    mismatch_rounds: int = library_field(_E, "mismatch_rounds")
 
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""

@@ -36,7 +36,7 @@ import pandas as pd
 from humancal.calibration.blind_views import blind_views, other_views_focal, resection_pass, translations_from_others
 from humancal.calibration.floor import FloorAlignment, NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
-from humancal.calibration.matching import groups_from_pairs
+from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
 from humancal.calibration.translations import root_positions, solve_focals_translations
@@ -91,6 +91,13 @@ class ExtrinsicsConfig:
             translations solved again at those focal lengths; each start gets ``blind_start_iterations``
             iterations and the lowest cost goes on. Empty: the other views' field of view only.
         blind_start_iterations: bundle-adjustment iterations given to each start of the blind views.
+        mismatch_threshold_sigma: after the bundle adjustment, a detection whose keypoints reproject further from
+            its group's than this many keypoint stds (median; the std is 1 % of the person's image extent) is
+            taken out of its group and the bundle adjustment run again (a person matched to a neighbour, the
+            same way in every frame of a static scene, pulls the rig towards a wrong one); 0 turns this off.
+        mismatch_max_fraction: when more of the detections than this fraction are above the threshold, none is
+            taken out (the rig is off, not a few matches).
+        mismatch_rounds: at most this many rounds of taking out and adjusting again.
     """
 
     rotation_threshold_deg: float = 10.0
@@ -114,6 +121,9 @@ class ExtrinsicsConfig:
     fov_range_deg: tuple[float, float] = (10.0, 140.0)
     blind_start_fov_deg: tuple[float, ...] = (50.0, 65.0, 80.0, 95.0, 115.0)
     blind_start_iterations: int = 12
+    mismatch_threshold_sigma: float = 10.0
+    mismatch_max_fraction: float = 0.2
+    mismatch_rounds: int = 2
 
     def __post_init__(self) -> None:
         if not 0.0 < self.rotation_threshold_deg < 90.0:
@@ -125,6 +135,11 @@ class ExtrinsicsConfig:
         if not 0.0 < self.fov_range_deg[0] < self.fov_range_deg[1] < 180.0:
             raise ValueError(f"ExtrinsicsConfig.fov_range_deg={self.fov_range_deg} must be 0 < narrowest < widest "
                              "< 180 degrees")
+        if not (self.mismatch_threshold_sigma >= 0.0 and 0.0 < self.mismatch_max_fraction <= 1.0
+                and self.mismatch_rounds >= 0):
+            raise ValueError(f"ExtrinsicsConfig: mismatch_threshold_sigma={self.mismatch_threshold_sigma} must be >= 0 "
+                             f"(0: off), mismatch_max_fraction={self.mismatch_max_fraction} in (0, 1], "
+                             f"mismatch_rounds={self.mismatch_rounds} >= 0")
 
     def replace(self, **changes) -> ExtrinsicsConfig:
         """A validated copy with some fields changed."""
@@ -158,6 +173,8 @@ class ExtrinsicsDiagnostics:
             lifter sees body proportions and sizes the people): about 1 for a consistent rig; far from 1, the
             cameras and the people disagree (a wrong solution, whatever its reprojection error).
         bundle_inlier_fraction: keypoints within the Huber threshold in the bundle adjustment.
+        mismatched_detections: detections taken out of their groups after a bundle adjustment (reprojected over
+            ``mismatch_threshold_sigma`` stds away: matched to the wrong person); ``groups`` is without them.
         timings_s: seconds per step.
     """
 
@@ -171,6 +188,7 @@ class ExtrinsicsDiagnostics:
     floor_problem: str | None = None
     people_world_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     body_size_ratio: float = float("nan")
+    mismatched_detections: int = 0
 
 
 @dataclass(frozen=True)
@@ -459,6 +477,7 @@ def estimate_extrinsics(
     points = _initial_points(groups, lifted, np.nan_to_num(roots.T_cam_m), detections.view, R, t_init)
 
     def adjust(f_start, R_start, t_start, points_start, iterations, lifted_cam=lifted):
+        # ``groups`` is read at each call: the mismatch rounds below replace it
         return bundle_adjust(
             detections, lifted_cam, groups, points_start, f_start, f_start, pp, R_start, t_start,
             square_pixels=config.square_pixels, focal_prior_px=f0, focal_prior_rel_std=prior_rel,
@@ -475,6 +494,20 @@ def estimate_extrinsics(
             logger.info("views %s: started the bundle adjustment from %s px (%s)", np.flatnonzero(unseen).tolist(),
                         np.round(f[unseen]).tolist(), started)
         ba = adjust(f, R, t_init, points, config.bundle_iterations)
+        dropped = 0
+        for _ in range(config.mismatch_rounds if config.mismatch_threshold_sigma > 0 else 0):
+            kept_groups, kept, n = drop_mismatched_detections(groups, ba.detection_error_sigma,
+                                                              config.mismatch_threshold_sigma,
+                                                              config.mismatch_max_fraction)
+            if n == 0 or len(kept_groups) < 3:
+                break
+            groups, dropped = kept_groups, dropped + n
+            ba = adjust(ba.fx_px, ba.R_cam_from_world, ba.t_cam_from_world_m, ba.points_world_m[kept],
+                        config.bundle_iterations)
+        if dropped:
+            logger.info("bundle adjustment: %d detections reprojected over %.0f stds from their groups (matched to "
+                        "the wrong person): taken out and adjusted again, %d groups left", dropped,
+                        config.mismatch_threshold_sigma, len(groups))
         for _ in range(3 if lifted_as_given.frame == "crop" else 0):
             if np.max(np.abs(np.log(ba.fx_px / f_frame))) < 0.02:
                 break
@@ -549,7 +582,8 @@ def estimate_extrinsics(
     diagnostics = ExtrinsicsDiagnostics(per_view, pair_table, group_table, floor, ba.inlier_fraction, timings,
                                         world_frame="floor" if floor is not None else "camera_0",
                                         floor_problem=floor_problem, people_world_m=people,
-                                        body_size_ratio=_body_size_ratio(ba.points_world_m, lifted, groups))
+                                        body_size_ratio=_body_size_ratio(ba.points_world_m, lifted, groups),
+                                        mismatched_detections=dropped)
     logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})

@@ -7,13 +7,18 @@ for calibration. With pair costs (e.g. the linear solve's root distances) it is 
 joined again from the cheapest up, skipping any pair that would put two detections of one view together. That
 keeps the people of crowded, static scenes (seated people close together), where many wrong pairs pass the
 consistency tests and nearly every component holds a conflict.
+
+A wrong pair can still pass those tests when people stand still: a seated person matched to their neighbour in
+another view, the same way in every frame, is a consistent alternative geometry that pulls the bundle
+adjustment towards a wrong rig. After a bundle adjustment such a detection reprojects tens of standard deviations
+away from its group's keypoints; :func:`drop_mismatched_detections` takes it out of its group.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["groups_from_pairs"]
+__all__ = ["drop_mismatched_detections", "groups_from_pairs"]
 
 
 def _find(parent: np.ndarray, i: int) -> int:
@@ -97,3 +102,35 @@ def _find_dict(parent: dict, i: int) -> int:
     while parent[i] != root:
         parent[i], i = root, parent[i]
     return root
+
+
+def drop_mismatched_detections(groups: list[np.ndarray], error_sigma: np.ndarray, threshold_sigma: float,
+                               max_fraction: float) -> tuple[list[np.ndarray], np.ndarray, int]:
+    """Take out of their groups the detections that reproject far from their group's keypoints.
+
+    Args:
+        groups: G arrays of detection rows.
+        error_sigma: (S,) per detection of the groups, in the order of ``np.concatenate(groups)``, its median
+            reprojection error in units of the keypoint std (:attr:`BundleResult.detection_error_sigma
+            <humancal.calibration.multiview_focal.BundleResult.detection_error_sigma>`); NaN: no keypoint used.
+        threshold_sigma: a detection above this error is dropped.
+        max_fraction: when more than this fraction of the detections is above the threshold, nothing is dropped:
+            the rig itself is off, not a few matches, and dropping would throw away the evidence.
+
+    Returns:
+        The remaining groups (at least two detections each), the index of each in ``groups`` (K,), and the number
+        of detections dropped.
+    """
+    sizes = [len(g) for g in groups]
+    if len(error_sigma) != sum(sizes):
+        raise ValueError(f"error_sigma has {len(error_sigma)} values for {sum(sizes)} detections in the groups")
+    bad = np.nan_to_num(np.asarray(error_sigma, dtype=np.float64), nan=0.0) > threshold_sigma
+    if not bad.any() or bad.mean() > max_fraction:
+        return list(groups), np.arange(len(groups)), 0
+    kept, index = [], []
+    for k, (g, flags) in enumerate(zip(groups, np.split(bad, np.cumsum(sizes)[:-1]))):
+        rest = g[~flags]
+        if len(rest) >= 2:
+            kept.append(rest)
+            index.append(k)
+    return kept, np.asarray(index, dtype=int), int(bad.sum())

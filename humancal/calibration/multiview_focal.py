@@ -82,6 +82,10 @@ class BundleResult:
             keypoint within the Huber threshold).
         rejected_steps: steps refused (cost increase, non-finite values or a singular system).
         cost: the final robust cost (comparable between runs on the same groups and priors).
+        detection_error_sigma: (S,) per detection of the groups (the rows of ``np.concatenate(groups)``, in that
+            order) the median reprojection error of its keypoints in units of their std (1 % of the person's
+            image extent, at least 1 px; see the module docstring), NaN where none of its keypoints was used:
+            about 1 for a detection of the right person, tens for one matched to the wrong person.
     """
 
     fx_px: np.ndarray
@@ -98,6 +102,7 @@ class BundleResult:
     view_status: np.ndarray | None = None
     rejected_steps: int = 0
     cost: float = float("nan")
+    detection_error_sigma: np.ndarray | None = None
 
 
 def focal_bounds_from_fov(width_px: np.ndarray, fov_range_deg: tuple[float, float] = (10.0, 140.0)) -> np.ndarray:
@@ -276,13 +281,26 @@ def bundle_adjust(
     rms = np.array([np.sqrt(np.mean(err_px[(prob.o_view == v) & inl] ** 2)) if np.any((prob.o_view == v) & inl)
                     else np.nan for v in range(V)])
     status = _view_status(prob, np.log(fx), log_bounds, P[:, 2], inl)
+    detection_error = _median_per_detection(err_px / sigma_px[d_idx], d_idx, len(rows))
     logger.info("bundle adjustment: %d groups, %d keypoints, %d iterations (%d steps refused), cost %.4g, rms %s px",
                 G, len(err_px), it, rejected, cost, np.round(rms, 2))
     if (status != "ok").any():
         logger.warning("bundle adjustment: views %s end %s", np.flatnonzero(status != "ok").tolist(),
                        status[status != "ok"].tolist())
     return BundleResult(fx, fy, R, t, X, f_std, rms, float(inl.mean()) if len(inl) else 0.0, it, converged,
-                        np.exp(log_q), status, rejected, float(cost))
+                        np.exp(log_q), status, rejected, float(cost), detection_error)
+
+
+def _median_per_detection(values: np.ndarray, detection: np.ndarray, count: int) -> np.ndarray:
+    """(count,) median of ``values`` ((N,)) per index of ``detection`` ((N,) in [0, count)); NaN where none."""
+    out = np.full(count, np.nan)
+    order = np.lexsort((values, detection))
+    detection, values = detection[order], values[order]
+    starts = np.flatnonzero(np.r_[True, detection[1:] != detection[:-1]]) if len(detection) else np.zeros(0, int)
+    ends = np.r_[starts[1:], len(detection)]
+    lo, hi = (starts + ends - 1) // 2, (starts + ends) // 2
+    out[detection[starts]] = 0.5 * (values[lo] + values[hi])
+    return out
 
 
 def _focal_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
