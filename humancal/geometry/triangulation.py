@@ -86,8 +86,11 @@ def _solve(
     X = np.full((N, 3), np.nan)
     ok = n_views >= min_views
     if ok.any():
-        _, _, Vt = np.linalg.svd(A[ok])
-        h = Vt[:, -1]
+        # the right singular vector of A's smallest singular value is the eigenvector of A^T A's smallest
+        # eigenvalue: a batched 4 x 4 symmetric eigenproblem costs a third of the batched SVD of A (2V x 4)
+        A_ok = A[ok]
+        _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", A_ok, A_ok))
+        h = vectors[:, :, 0]
         with np.errstate(divide="ignore", invalid="ignore"):
             X[ok] = h[:, :3] / h[:, 3:4]
     return X, np.where(ok, n_views, 0)
