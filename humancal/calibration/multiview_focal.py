@@ -39,6 +39,7 @@ import logging
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import ndimage
 
 from humancal.calibration.bundle_terms import (
     _Problem,
@@ -293,14 +294,10 @@ def bundle_adjust(
 
 def _median_per_detection(values: np.ndarray, detection: np.ndarray, count: int) -> np.ndarray:
     """(count,) median of ``values`` ((N,)) per index of ``detection`` ((N,) in [0, count)); NaN where none."""
-    out = np.full(count, np.nan)
-    order = np.lexsort((values, detection))
-    detection, values = detection[order], values[order]
-    starts = np.flatnonzero(np.r_[True, detection[1:] != detection[:-1]]) if len(detection) else np.zeros(0, int)
-    ends = np.r_[starts[1:], len(detection)]
-    lo, hi = (starts + ends - 1) // 2, (starts + ends) // 2
-    out[detection[starts]] = 0.5 * (values[lo] + values[hi])
-    return out
+    if len(values) == 0:
+        return np.full(count, np.nan)
+    medians = np.asarray(ndimage.median(values, labels=detection, index=np.arange(count)), dtype=np.float64)
+    return np.where(np.bincount(detection, minlength=count) > 0, medians, np.nan)  # scipy gives garbage for none
 
 
 def _focal_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
