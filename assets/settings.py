@@ -199,6 +199,7 @@ class BodyFitSettings(dg.Config):
     window_overlap: int = library_field(_B, "window_overlap")
     latent_start: str = library_field(_B, "latent_start")
     iterations_3d: int = library_field(_B, "iterations_3d")
+    half_rate_fraction_3d: float = library_field(_B, "half_rate_fraction_3d")
     learning_rate_3d: float = library_field(_B, "learning_rate_3d")
     iterations_global: int = library_field(_B, "iterations_global")
     iterations_body: int = library_field(_B, "iterations_body")

@@ -72,6 +72,16 @@ def _errors(scene, motions, skeletons, truth_of):
     return 1000.0 * out / motions.num_people
 
 
+def config_overrides(items: list[str]) -> dict:
+    """``["FIELD=VALUE", ...]`` -> BodyFitConfig field changes, each value of its field's type."""
+    overrides = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        kind = type(getattr(BodyFitConfig(), name))
+        overrides[name] = value if kind is str else kind(float(value) if "." in value else int(value))
+    return overrides
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--preset", default="benchmark")
@@ -82,10 +92,7 @@ def main() -> None:
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                         help="override a BodyFitConfig field (repeatable), e.g. --set iterations_3d=200")
     args = parser.parse_args()
-    overrides = {}
-    for item in args.set:
-        name, _, value = item.partition("=")
-        overrides[name] = type(getattr(BodyFitConfig(), name))(float(value) if "." in value else int(value))
+    overrides = config_overrides(args.set)
     config = BodyFitConfig().replace(cameras=args.cameras, **overrides)
     torch.set_num_threads(args.threads)
     with threadpoolctl.threadpool_limits(args.threads):

@@ -7,7 +7,7 @@ three ways with the default settings, the true cameras held fixed; every method 
 ``evaluation.body_metrics`` (the metric table's protocol). Prints one line per scene and method, then the median and mean of every figure per method, and writes
 ``<out>/body_sweep.csv``.
 
-    python scripts/body_sweep.py [--scenes 10] [--seed 0] [--jobs 2] [--out /tmp/body_sweep]
+    python scripts/body_sweep.py [--scenes 10] [--seed 0] [--jobs 2] [--out /tmp/body_sweep] [--set FIELD=VALUE]
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from bench_fit import config_overrides
 from sweep_summary import run_and_summarise
 
 _METRICS = ("mpjpe_mm", "pa_mpjpe_mm", "pcp_avg", "accel_error_mm_s2", "pve_mm", "reprojection_error_px", "seconds")
@@ -29,7 +30,7 @@ def scene_options(index: int, seed: int) -> dict:
                 num_views=int(rng.integers(3, 7)), num_frames=150)
 
 
-def run_scene(job: tuple[int, int]) -> pd.DataFrame:
+def run_scene(job: tuple[int, int, dict]) -> pd.DataFrame:
     import time
 
     import torch
@@ -46,7 +47,7 @@ def run_scene(job: tuple[int, int]) -> pd.DataFrame:
     from humancal.synthetic import generate_scene, preset
 
     torch.set_num_threads(1)
-    index, seed = job
+    index, seed, overrides = job
     options = scene_options(index, seed)
     name = f"scene_{index:02d}"
     body = BodyModel()
@@ -66,7 +67,7 @@ def run_scene(job: tuple[int, int]) -> pd.DataFrame:
     for method, prior in (("fit", shipped_prior()[0]), ("fit_per_frame_prior", shipped_prior("per_frame")[0]),
                           ("fit_no_prior", None)):
         start = time.perf_counter()
-        fit = fit_bodies(body, observations, rig, prior, BodyFitConfig(cameras="fixed"), fps=scene.config.fps)
+        fit = fit_bodies(body, observations, rig, prior, BodyFitConfig(cameras="fixed").replace(**overrides), fps=scene.config.fps)
         seconds = time.perf_counter() - start
         for r in body_metric_rows(spec, motions=fit.motions.to_table(name), seconds=seconds, **common):
             rows.append({"scene": name, "method": method, "metric": r.metric, "value": r.value})
@@ -86,9 +87,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", type=Path, default=Path("/tmp/body_sweep"))
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="override a BodyFitConfig field of every fit (repeatable)")
     args = parser.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    jobs = [(i, args.seed) for i in range(args.scenes)]
+    jobs = [(i, args.seed, config_overrides(args.set)) for i in range(args.scenes)]
     wide = run_and_summarise(run_scene, jobs, args.jobs, _METRICS, args.out / "body_sweep.csv")
     for metric in ("mpjpe_mm", "accel_error_mm_s2"):
         beats = {m: int((wide[("fit", metric)] < wide[(m, metric)]).sum())

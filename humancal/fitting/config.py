@@ -47,7 +47,12 @@ class BodyFitConfig:
         latent_start: where a prior fit's latents start: ``prior_mean`` (z = 0, the prior's mode: a natural
             average pose) or ``reference_pose`` (the encoding of the body model's reference pose, arms out).
         iterations_3d: Adam steps of the initialisation stage on the triangulated joints (shape, root, pose).
-        learning_rate_3d: Adam's initial learning rate there (decays linearly to a tenth).
+        half_rate_fraction_3d: the fraction of those steps that run first on every other frame (the sequence at
+            half its frame rate: half the frames to decode per step, and a motion the prior knows, since it is
+            trained on clips played at half to twice their speed); the fitted variables are then interpolated to
+            every frame and the rest of the steps run there. Only for sequences of at least ``2 * window_frames``
+            frames (shorter ones are cheap). 0: every step on every frame.
+        learning_rate_3d: Adam's initial learning rate there (decays linearly to a tenth over all the steps).
         iterations_global: L-BFGS iterations of the global stage (root orientation and translation on the 2D
             detections, pose and shape held).
         iterations_body: L-BFGS iterations of the body stage (everything on the 2D detections).
@@ -86,6 +91,7 @@ class BodyFitConfig:
     window_overlap: int = 6
     latent_start: str = "prior_mean"
     iterations_3d: int = 300
+    half_rate_fraction_3d: float = 0.8
     iterations_global: int = 10
     iterations_body: int = 30
     learning_rate_3d: float = 0.05
@@ -118,6 +124,8 @@ class BodyFitConfig:
                      "camera_prior_scale_m", "contact_scale_m"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"BodyFitConfig.{name} must be > 0")
+        if self.half_rate_fraction_3d > 1:
+            raise ValueError(f"BodyFitConfig.half_rate_fraction_3d={self.half_rate_fraction_3d} must be in [0, 1]")
         if self.learning_rate_3d <= 0:
             raise ValueError("BodyFitConfig.learning_rate_3d must be > 0")
         if self.window_frames < 4 or not 0 <= self.window_overlap < self.window_frames // 2:

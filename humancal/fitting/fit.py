@@ -122,8 +122,10 @@ class _Problem:
     """The variables and terms of one fit (internal: :func:`fit_bodies` drives it)."""
 
     def __init__(self, body: BodyModel, observations: BodyObservations, rig: CameraRig, prior: MotionVAE | None,
-                 config: BodyFitConfig) -> None:
+                 config: BodyFitConfig, time_stride: int = 1) -> None:
         self.body, self.config, self.prior = body, config, prior
+        # frames apart of consecutive frames here (2: the half-rate start): the temporal terms' scales follow it
+        self.time_stride = time_stride
         to = self.to = dict(dtype=body.dtype, device=body.device)
         P, T = observations.num_people, observations.num_frames
         self.P, self.T = P, T
@@ -175,6 +177,20 @@ class _Problem:
         self.pose_params = mu.reshape(P, W, L, -1).clone().requires_grad_()
         self.latent = True
 
+    def take_half_rate(self, coarse: _Problem) -> None:
+        """Start from a fit of every other frame (``coarse``, ``time_stride`` 2): its shape, and its roots and body
+        pose interpolated linearly in time to every frame (the latent codes too: the local-linear term keeps them
+        nearly linear between neighbouring frames)."""
+        with torch.no_grad():
+            self.shape_logit.copy_(coarse.shape_logit)
+            self.root6d.copy_(_upsample_frames(coarse.root6d, self.T))
+            self.translation.copy_(_upsample_frames(coarse.translation, self.T))
+            if self.latent:
+                per_frame = _upsample_frames(coarse.layout.assemble(coarse.pose_params), self.T)
+                self.pose_params.copy_(self.layout.split(per_frame))
+            else:
+                self.pose_params.copy_(_upsample_frames(coarse.pose_params, self.T))
+
     def phenotypes(self) -> Tensor:
         return torch.sigmoid(self.shape_logit)
 
@@ -225,7 +241,7 @@ class _Problem:
         else:
             r2, weights = self.reprojection(keypoints)
             out["reprojection"] = _weighted_mean(_geman_mcclure(r2, c.robust_scale_px, c.noise_px), weights)
-        scale = c.root_smooth_scale_m
+        scale = c.root_smooth_scale_m * self.time_stride**2  # a second difference grows as the frame step squared
         out["root_smooth"] = _mean_square(_second_difference(self.translation, 1) / scale) + \
             _mean_square(_second_difference(self.root6d, 1) / scale)
         out["shape"] = _mean_square(self.phenotypes() - self.phenotypes0)
@@ -248,6 +264,7 @@ class _Problem:
     def total(self, terms: dict[str, Tensor]) -> Tensor:
         c = self.config
         local_linear = c.weight_local_linear_3d if "data_3d" in terms else c.weight_local_linear
+        local_linear /= self.time_stride**4  # the same smoothness per unit of time at a coarser frame step
         if self.prior is not None and not self.prior.config.temporal:
             local_linear = 0.0  # a per-frame prior is the baseline without dynamics: no smoothness of its latents
         weights = {"data_3d": 1.0, "reprojection": 1.0, "root_smooth": c.weight_root_smooth, "shape": c.weight_shape,
@@ -265,10 +282,29 @@ class _Problem:
         return [*shape, self.root6d, self.translation, self.pose_params]
 
 
+def _upsample_frames(values: Tensor, num_frames: int) -> Tensor:
+    """(P, Tc, ...) values of frames 0, 2, 4, ... -> (P, num_frames, ...), linear in time (the last odd frame of an
+    even-length sequence takes the last value)."""
+    position = torch.arange(num_frames, device=values.device) / 2.0
+    low = position.floor().long().clamp(max=values.shape[1] - 1)
+    high = (low + 1).clamp(max=values.shape[1] - 1)
+    weight = (position - low).clamp(0.0, 1.0).to(values.dtype).reshape(1, -1, *([1] * (values.dim() - 2)))
+    return values[:, low] * (1.0 - weight) + values[:, high] * weight
+
+
+def _half_rate_steps(config: BodyFitConfig, num_frames: int) -> int:
+    """How many ``fit3d`` steps run on every other frame first (``BodyFitConfig.half_rate_fraction_3d``)."""
+    if num_frames < 2 * config.window_frames:
+        return 0
+    return int(round(config.half_rate_fraction_3d * config.iterations_3d))
+
+
 def _run_stage(problem: _Problem, stage: str, iterations: int,
-               progress: Callable[[str, int, float], None] | None) -> dict[str, float]:
+               progress: Callable[[str, int, float], None] | None,
+               schedule: tuple[int, int] | None = None) -> dict[str, float]:
     """Adam (``fit3d``) or L-BFGS with a strong-Wolfe line search (the 2D stages) on one stage's variables; the
-    last terms, unweighted (and ``total``, weighted)."""
+    last terms, unweighted (and ``total``, weighted). ``schedule``: ``(first step, all steps)`` of Adam's linear
+    learning-rate decay when this run is a part of it (default: the whole of it)."""
     data = "3d" if stage == "fit3d" else "2d"
     variables = problem.stage_variables(stage)
     if stage == "cameras":  # the people are held: their keypoints once, not at every evaluation
@@ -286,11 +322,12 @@ def _run_stage(problem: _Problem, stage: str, iterations: int,
             return _optimize(problem, stage, data, variables, iterations, progress)
         finally:
             problem.held_pose = None
-    return _optimize(problem, stage, data, variables, iterations, progress)
+    return _optimize(problem, stage, data, variables, iterations, progress, schedule or (0, iterations))
 
 
 def _optimize(problem: _Problem, stage: str, data: str, variables: list[Tensor], iterations: int,
-              progress: Callable[[str, int, float], None] | None) -> dict[str, float]:
+              progress: Callable[[str, int, float], None] | None,
+              schedule_window: tuple[int, int] | None = None) -> dict[str, float]:
     if iterations == 0:
         with torch.no_grad():
             return {k: float(v) for k, v in problem.terms(data).items()}
@@ -301,7 +338,8 @@ def _optimize(problem: _Problem, stage: str, data: str, variables: list[Tensor],
     else:  # thousands of nearly separable per-frame problems far from their solution: Adam's per-variable steps
         optimizer = torch.optim.Adam(variables, lr=problem.config.learning_rate_3d)
         steps = iterations
-        schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda i: 1.0 - 0.9 * i / iterations)
+        first, total = schedule_window or (0, iterations)
+        schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda i: 1.0 - 0.9 * (first + i) / total)
     calls = [0]
 
     def closure() -> Tensor:
@@ -380,9 +418,21 @@ def fit_bodies(
     terms: dict[str, float] = {}
     for stage in STAGES:
         seconds[stage] = 0.0
+    half_rate = _half_rate_steps(config, observations.num_frames)
+    if half_rate:
+        stage_start = time.perf_counter()
+        coarse = _Problem(body, observations.every_other_frame(), rig, prior, config, time_stride=2)
+        coarse.encode_pose()
+        terms = _run_stage(coarse, "fit3d", half_rate, progress, schedule=(0, config.iterations_3d))
+        problem.take_half_rate(coarse)
+        seconds["fit3d"] += time.perf_counter() - stage_start
+        log.info("body fit, fit3d on every other frame: %s in %.1f s", ", ".join(
+            f"{k} {v:.4g}" for k, v in terms.items()), time.perf_counter() - stage_start)
     for stage, iterations in _schedule(config, problem.cameras.moves):
         stage_start = time.perf_counter()
-        terms = _run_stage(problem, stage, iterations, progress)
+        schedule = (half_rate, config.iterations_3d) if stage == "fit3d" else None
+        terms = _run_stage(problem, stage, iterations - half_rate if stage == "fit3d" else iterations, progress,
+                           schedule)
         seconds[stage] += time.perf_counter() - stage_start
         log.info("body fit, %s: %s in %.1f s", stage, ", ".join(f"{k} {v:.4g}" for k, v in terms.items()),
                  time.perf_counter() - stage_start)

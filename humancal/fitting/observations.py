@@ -67,6 +67,13 @@ class BodyObservations:
                                 self.present[rows])
 
 
+    def every_other_frame(self) -> BodyObservations:
+        """The observations of frames 0, 2, 4, ... (``frames`` then steps by 2): the sequence at half its rate."""
+        return BodyObservations(self.person_ids, self.frames[::2], self.keypoints_px[:, :, ::2],
+                                self.confidence[:, :, ::2], self.joints_world_m[:, ::2], self.joints_valid[:, ::2],
+                                self.present[:, ::2])
+
+
 def body_observations(detections: DenseDetections, associations: pd.DataFrame, skeletons3d: pd.DataFrame,
                       num_views: int, *, min_views: int = 2, min_frames: int = 3) -> tuple[BodyObservations, list[str]]:
     """Dense per-person observations from the association's tables.

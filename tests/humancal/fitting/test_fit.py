@@ -103,3 +103,48 @@ def test_latents_start_at_the_prior_mean_or_the_reference_pose(body_model, scene
     assert starts["reference_pose"].abs().mean() > 0.1  # the reference pose (arms out) is far from the mean
     with pytest.raises(ValueError, match="latent_start"):
         BodyFitConfig(latent_start="zeros")
+
+
+def test_half_rate_values_are_interpolated_linearly_in_time():
+    from humancal.fitting.fit import _upsample_frames
+
+    for num_frames in (9, 10):
+        time = torch.arange(num_frames, dtype=torch.float64)
+        line = torch.stack([3.0 * time - 1.0, -0.5 * time], dim=-1)[None]  # (1, T, 2), linear in time
+        coarse = line[:, ::2]
+        up = _upsample_frames(coarse, num_frames)
+        assert up.shape == line.shape
+        if num_frames % 2:  # every frame lies between two coarse ones: exact
+            torch.testing.assert_close(up, line)
+        else:  # the last (odd) frame has no coarse frame after it: it keeps the last value
+            torch.testing.assert_close(up[:, :-1], line[:, :-1])
+            torch.testing.assert_close(up[:, -1], coarse[:, -1])
+
+
+def test_half_rate_start_decodes_half_the_frames_and_fits_as_well(body_model, scene_inputs):
+    from humancal.prior.windows import window_layout
+
+    scene, observations, rig = scene_inputs
+    prior = shipped_prior()[0]
+    windows = FAST.replace(window_frames=16, window_overlap=4)  # 40 frames >= 2 windows: the half-rate start applies
+    decoded = []
+    decode = prior.decode
+    prior.decode = lambda z: decoded.append(z.shape[0] * z.shape[1]) or decode(z)
+    try:
+        torch.manual_seed(0)
+        full = fit_bodies(body_model, observations, rig, prior, windows.replace(half_rate_fraction_3d=0.0), fps=30.0)
+        full_decoded, decoded[:] = list(decoded), []
+        torch.manual_seed(0)
+        half = fit_bodies(body_model, observations, rig, prior, windows.replace(half_rate_fraction_3d=2 / 3), fps=30.0)
+    finally:
+        prior.decode = decode
+    # the first 100 fit3d steps (and the stage's final terms) decode the windows of 20 of the 40 frames (2 people),
+    # the rest those of all 40
+    per_person = {t: window_layout(t, 16, 4).num_windows * 16 for t in (20, 40)}
+    assert decoded[:101] == [2 * per_person[20]] * 101 and decoded[101] == full_decoded[0] == 2 * per_person[40]
+    mpjpe_full, accel_full = _errors(scene, full.motions)
+    mpjpe_half, accel_half = _errors(scene, half.motions)
+    assert mpjpe_half < 1.1 * mpjpe_full, (mpjpe_half, mpjpe_full)
+    assert accel_half < 1.2 * accel_full, (accel_half, accel_full)
+    with pytest.raises(ValueError, match="half_rate_fraction_3d"):
+        FAST.replace(half_rate_fraction_3d=1.5)
