@@ -180,16 +180,22 @@ class _Problem:
     def take_half_rate(self, coarse: _Problem) -> None:
         """Start from a fit of every other frame (``coarse``, ``time_stride`` 2): its shape, and its roots and body
         pose interpolated linearly in time to every frame (the latent codes too: the local-linear term keeps them
-        nearly linear between neighbouring frames)."""
+        nearly linear between neighbouring frames). A person with no triangulated joint on those frames (a short
+        track seen on odd frames only) keeps this problem's own start."""
+        seen = coarse.joints_weight.flatten(1).sum(1) > 0  # (P,)
+
+        def take(variable: Tensor, value: Tensor) -> None:
+            variable.copy_(torch.where(seen.reshape(-1, *[1] * (variable.dim() - 1)), value, variable))
+
         with torch.no_grad():
-            self.shape_logit.copy_(coarse.shape_logit)
-            self.root6d.copy_(_upsample_frames(coarse.root6d, self.T))
-            self.translation.copy_(_upsample_frames(coarse.translation, self.T))
+            take(self.shape_logit, coarse.shape_logit)
+            take(self.root6d, _upsample_frames(coarse.root6d, self.T))
+            take(self.translation, _upsample_frames(coarse.translation, self.T))
             if self.latent:
                 per_frame = _upsample_frames(coarse.layout.assemble(coarse.pose_params), self.T)
-                self.pose_params.copy_(self.layout.split(per_frame))
+                take(self.pose_params, self.layout.split(per_frame))
             else:
-                self.pose_params.copy_(_upsample_frames(coarse.pose_params, self.T))
+                take(self.pose_params, _upsample_frames(coarse.pose_params, self.T))
 
     def phenotypes(self) -> Tensor:
         return torch.sigmoid(self.shape_logit)

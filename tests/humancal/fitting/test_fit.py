@@ -148,3 +148,26 @@ def test_half_rate_start_decodes_half_the_frames_and_fits_as_well(body_model, sc
     assert accel_half < 1.2 * accel_full, (accel_half, accel_full)
     with pytest.raises(ValueError, match="half_rate_fraction_3d"):
         FAST.replace(half_rate_fraction_3d=1.5)
+
+
+def test_a_person_unseen_on_the_half_rate_frames_keeps_its_own_start(body_model, scene_inputs):
+    from dataclasses import replace
+
+    from humancal.fitting.fit import _Problem
+
+    scene, observations, rig = scene_inputs
+    valid = observations.joints_valid.copy()
+    valid[1, ::2] = False  # person 1 triangulated on odd frames only
+    observations = replace(observations, joints_valid=valid)
+    prior = shipped_prior()[0].to(dtype=body_model.dtype).eval()
+    config = FAST.replace(window_frames=16, window_overlap=4)
+    full = _Problem(body_model, observations, rig, prior, config)
+    full.encode_pose()
+    coarse = _Problem(body_model, observations.every_other_frame(), rig, prior, config, time_stride=2)
+    coarse.encode_pose()
+    with torch.no_grad():
+        coarse.translation += 1.0  # as if the half-rate steps had moved every root by a metre
+    before = full.translation.detach().clone()
+    full.take_half_rate(coarse)
+    moved = (full.translation.detach() - before).norm(dim=-1).mean(dim=1)
+    assert moved[0] > 0.5 and moved[1] == 0, moved  # person 0 takes the half-rate fit, person 1 keeps its start
