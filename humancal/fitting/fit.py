@@ -328,7 +328,7 @@ def _run_stage(problem: _Problem, stage: str, iterations: int,
             return _optimize(problem, stage, data, variables, iterations, progress)
         finally:
             problem.held_pose = None
-    return _optimize(problem, stage, data, variables, iterations, progress, schedule or (0, iterations))
+    return _optimize(problem, stage, data, variables, iterations, progress, schedule)
 
 
 def _optimize(problem: _Problem, stage: str, data: str, variables: list[Tensor], iterations: int,
@@ -434,11 +434,11 @@ def fit_bodies(
         seconds["fit3d"] += time.perf_counter() - stage_start
         log.info("body fit, fit3d on every other frame: %s in %.1f s", ", ".join(
             f"{k} {v:.4g}" for k, v in terms.items()), time.perf_counter() - stage_start)
-    for stage, iterations in _schedule(config, problem.cameras.moves):
+    for stage, iterations in _schedule(config, problem.cameras.moves, half_rate):
         stage_start = time.perf_counter()
+        # fit3d's every-frame steps continue the learning-rate decay where the half-rate steps left it
         schedule = (half_rate, config.iterations_3d) if stage == "fit3d" else None
-        terms = _run_stage(problem, stage, iterations - half_rate if stage == "fit3d" else iterations, progress,
-                           schedule)
+        terms = _run_stage(problem, stage, iterations, progress, schedule)
         seconds[stage] += time.perf_counter() - stage_start
         log.info("body fit, %s: %s in %.1f s", stage, ", ".join(f"{k} {v:.4g}" for k, v in terms.items()),
                  time.perf_counter() - stage_start)
@@ -468,12 +468,14 @@ def fit_bodies(
                          tuple(fit_warnings))
 
 
-def _schedule(config: BodyFitConfig, cameras_move: bool) -> list[tuple[str, int]]:
-    """The stages in order with their iterations (module docstring)."""
+def _schedule(config: BodyFitConfig, cameras_move: bool, half_rate_steps: int = 0) -> list[tuple[str, int]]:
+    """The stages in order with their iterations on every frame (module docstring; ``half_rate_steps`` of fit3d's
+    steps ran before, on every other frame)."""
     rounds = [("global", config.iterations_global), ("body", config.iterations_body)]
+    fit3d = ("fit3d", config.iterations_3d - half_rate_steps)
     if not cameras_move:
-        return [("fit3d", config.iterations_3d), *rounds]
-    return [("fit3d", config.iterations_3d)] + [("cameras", config.iterations_cameras), *rounds] * config.rounds
+        return [fit3d, *rounds]
+    return [fit3d] + [("cameras", config.iterations_cameras), *rounds] * config.rounds
 
 
 MIN_STANDING_FRAMES = 5

@@ -66,7 +66,6 @@ class BodyObservations:
                                 self.confidence[:, rows], self.joints_world_m[rows], self.joints_valid[rows],
                                 self.present[rows])
 
-
     def every_other_frame(self) -> BodyObservations:
         """The observations of frames 0, 2, 4, ... (``frames`` then steps by 2): the sequence at half its rate."""
         return BodyObservations(self.person_ids, self.frames[::2], self.keypoints_px[:, :, ::2],
