@@ -55,6 +55,7 @@ from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.contact import interpenetration
 from humancal.fitting.motions import FittedMotions
 from humancal.fitting.observations import BodyObservations, FittingInputError, unswap_left_right
+from humancal.fitting.schedule import half_rate_steps, stage_schedule, upsample_frames
 from humancal.lifter.pose_cues import standing_score
 from humancal.prior.config import NUM_PRIOR_BONES
 from humancal.prior.fitting import KeypointObservations, initial_root
@@ -189,13 +190,13 @@ class _Problem:
 
         with torch.no_grad():
             take(self.shape_logit, coarse.shape_logit)
-            take(self.root6d, _upsample_frames(coarse.root6d, self.T))
-            take(self.translation, _upsample_frames(coarse.translation, self.T))
+            take(self.root6d, upsample_frames(coarse.root6d, self.T))
+            take(self.translation, upsample_frames(coarse.translation, self.T))
             if self.latent:
-                per_frame = _upsample_frames(coarse.layout.assemble(coarse.pose_params), self.T)
+                per_frame = upsample_frames(coarse.layout.assemble(coarse.pose_params), self.T)
                 take(self.pose_params, self.layout.split(per_frame))
             else:
-                take(self.pose_params, _upsample_frames(coarse.pose_params, self.T))
+                take(self.pose_params, upsample_frames(coarse.pose_params, self.T))
 
     def phenotypes(self) -> Tensor:
         return torch.sigmoid(self.shape_logit)
@@ -286,23 +287,6 @@ class _Problem:
         if stage == "cameras":
             return self.cameras.variables()
         return [*shape, self.root6d, self.translation, self.pose_params]
-
-
-def _upsample_frames(values: Tensor, num_frames: int) -> Tensor:
-    """(P, Tc, ...) values of frames 0, 2, 4, ... -> (P, num_frames, ...), linear in time (the last odd frame of an
-    even-length sequence takes the last value)."""
-    position = torch.arange(num_frames, device=values.device) / 2.0
-    low = position.floor().long().clamp(max=values.shape[1] - 1)
-    high = (low + 1).clamp(max=values.shape[1] - 1)
-    weight = (position - low).clamp(0.0, 1.0).to(values.dtype).reshape(1, -1, *([1] * (values.dim() - 2)))
-    return values[:, low] * (1.0 - weight) + values[:, high] * weight
-
-
-def _half_rate_steps(config: BodyFitConfig, num_frames: int) -> int:
-    """How many ``fit3d`` steps run on every other frame first (``BodyFitConfig.half_rate_fraction_3d``)."""
-    if num_frames < 2 * config.window_frames:
-        return 0
-    return int(round(config.half_rate_fraction_3d * config.iterations_3d))
 
 
 def _run_stage(problem: _Problem, stage: str, iterations: int,
@@ -424,7 +408,7 @@ def fit_bodies(
     terms: dict[str, float] = {}
     for stage in STAGES:
         seconds[stage] = 0.0
-    half_rate = _half_rate_steps(config, observations.num_frames)
+    half_rate = half_rate_steps(config, observations.num_frames)
     if half_rate:
         stage_start = time.perf_counter()
         coarse = _Problem(body, observations.every_other_frame(), rig, prior, config, time_stride=2)
@@ -434,7 +418,7 @@ def fit_bodies(
         seconds["fit3d"] += time.perf_counter() - stage_start
         log.info("body fit, fit3d on every other frame: %s in %.1f s", ", ".join(
             f"{k} {v:.4g}" for k, v in terms.items()), time.perf_counter() - stage_start)
-    for stage, iterations in _schedule(config, problem.cameras.moves, half_rate):
+    for stage, iterations in stage_schedule(config, problem.cameras.moves, half_rate):
         stage_start = time.perf_counter()
         # fit3d's every-frame steps continue the learning-rate decay where the half-rate steps left it
         schedule = (half_rate, config.iterations_3d) if stage == "fit3d" else None
@@ -466,16 +450,6 @@ def fit_bodies(
     cameras = problem.cameras.to_rig() if problem.cameras.moves else rig
     return BodyFitResult(motions, cameras, latents, seconds, terms, reprojection_px,
                          tuple(fit_warnings))
-
-
-def _schedule(config: BodyFitConfig, cameras_move: bool, half_rate_steps: int = 0) -> list[tuple[str, int]]:
-    """The stages in order with their iterations on every frame (module docstring; ``half_rate_steps`` of fit3d's
-    steps ran before, on every other frame)."""
-    rounds = [("global", config.iterations_global), ("body", config.iterations_body)]
-    fit3d = ("fit3d", config.iterations_3d - half_rate_steps)
-    if not cameras_move:
-        return [fit3d, *rounds]
-    return [fit3d] + [("cameras", config.iterations_cameras), *rounds] * config.rounds
 
 
 MIN_STANDING_FRAMES = 5

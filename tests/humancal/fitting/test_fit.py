@@ -106,13 +106,13 @@ def test_latents_start_at_the_prior_mean_or_the_reference_pose(body_model, scene
 
 
 def test_half_rate_values_are_interpolated_linearly_in_time():
-    from humancal.fitting.fit import _upsample_frames
+    from humancal.fitting.schedule import upsample_frames
 
     for num_frames in (9, 10):
         time = torch.arange(num_frames, dtype=torch.float64)
         line = torch.stack([3.0 * time - 1.0, -0.5 * time], dim=-1)[None]  # (1, T, 2), linear in time
         coarse = line[:, ::2]
-        up = _upsample_frames(coarse, num_frames)
+        up = upsample_frames(coarse, num_frames)
         assert up.shape == line.shape
         if num_frames % 2:  # every frame lies between two coarse ones: exact
             torch.testing.assert_close(up, line)
