@@ -80,11 +80,12 @@ def metric_tables(
                                           failed_checks=failed))
         if identified:  # who is who, against the true identities (the association itself never reads them)
             # the association with the true cameras (evaluation only), once for the association and body rows
-            with_true_cameras = associate_tables(*lifted_from_table(detections), gt, spec.sequence)
+            dense, lifted = lifted_from_table(detections)
+            with_true_cameras = associate_tables(dense, lifted, gt, spec.sequence)
             parts.append(association_metric_table(
                 spec, associations=associations, skeletons3d=skeletons3d,
                 seconds=latest_association_seconds(context.instance, context.partition_key),
-                lifted_detections=detections, cameras=estimated, gt_associations=gt_associations,
+                dense=dense, lifted=lifted, cameras=estimated, gt_associations=gt_associations,
                 gt_poses3d=gt_poses3d, gt_cameras=gt, failed_checks=failed, gt_cameras_association=with_true_cameras))
             with torch_runtime.applied():
                 parts.append(pipeline_body_table(

@@ -39,7 +39,7 @@ from humancal.associations import Associations
 from humancal.calibration.alignment import align_rig
 from humancal.camera import Camera, CameraRig
 from humancal.detections import DenseDetections
-from humancal.lifter import LiftedPoses, lifted_from_table
+from humancal.lifter import LiftedPoses
 from humancal.sequences import SequenceSpec
 
 __all__ = ["identity_metrics", "identity_confusion", "skeleton_metrics", "skeletons_in_truth", "protocol_of",
@@ -210,7 +210,8 @@ def association_metric_table(
     associations: pd.DataFrame,
     skeletons3d: pd.DataFrame,
     seconds: float,
-    lifted_detections: pd.DataFrame,
+    dense: DenseDetections,
+    lifted: LiftedPoses,
     cameras: list[Camera],
     gt_associations: pd.DataFrame,
     gt_poses3d: pd.DataFrame,
@@ -224,12 +225,13 @@ def association_metric_table(
 
     Args:
         seconds: the pipeline association's run time, seconds (NaN where unknown).
+        dense, lifted: the ``detections`` asset's detections and lifted poses
+            (``humancal.lifter.lifted_from_table``), which the other methods associate.
         failed_checks: the checks the estimated cameras failed (as the camera rows).
         gt_cameras_association: :func:`associate_tables` with the true cameras and the default affinity, when the
             caller has it already (it is computed here otherwise).
     """
     parts = []
-    dense, lifted = lifted_from_table(lifted_detections)
 
     def run(rig_cameras: list[Camera], affinity: AffinityConfig):
         return associate_tables(dense, lifted, rig_cameras, spec.sequence, affinity)

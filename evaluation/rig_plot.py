@@ -17,14 +17,20 @@ _ANKLES = ("left_ankle", "right_ankle")
 
 
 def people_floor_points_m(
-    cameras: list[Camera], detections: pd.DataFrame, associations: pd.DataFrame, max_points: int = 3000
+    cameras: list[Camera], detections: pd.DataFrame, associations: pd.DataFrame, max_points: int = 3000,
+    max_frames: int = 300,
 ) -> np.ndarray:
-    """Floor positions (ankle midpoint with z = 0) of the identified people triangulated with ``cameras``.
+    """Floor positions (ankle midpoint with z = 0) of the identified people triangulated with ``cameras``, in at
+    most ``max_frames`` frames evenly spread over the sequence (a picture needs no more).
 
     Returns:
         (N, 3) points in the cameras' world, metres, at most ``max_points`` (evenly subsampled).
     """
     ankle_rows = detections[detections["joint"].isin(_ANKLES)]  # each joint is triangulated on its own
+    frames = np.unique(ankle_rows["frame"].to_numpy())
+    if len(frames) > max_frames:
+        kept = frames[np.linspace(0, len(frames) - 1, max_frames).round().astype(int)]
+        ankle_rows = ankle_rows[ankle_rows["frame"].isin(kept)]
     poses = triangulate_identified(ankle_rows, associations, cameras, "")
     ankles = poses[poses["joint"].isin(_ANKLES) & poses["valid"]]
     both = ankles.groupby(["frame", "person_id"])[["x_m", "y_m", "z_m"]].agg(["mean", "count"])

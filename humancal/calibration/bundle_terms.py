@@ -154,7 +154,9 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     r = r_obs * np.sqrt(w_obs)[:, None]
 
     Hcc = np.zeros((p.V, nc, nc))
-    _scatter_blocks(Hcc, v, Jc.transpose(0, 2, 1) @ Jc)
+    for view in range(p.V):  # one product per view: its rows of the Jacobian stacked
+        rows = Jc[v == view].reshape(-1, nc)
+        Hcc[view] = rows.T @ rows
     gc = np.zeros((p.V, nc))
     _scatter_blocks(gc, v, np.einsum("ori,or->oi", Jc, r))
     Hcp = np.zeros((p.G, p.V, nc, J3))
@@ -162,10 +164,14 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     blk = Jc.transpose(0, 2, 1) @ Jp  # (O, nc, 3)
     flat = ((p.o_group * p.V + v)[:, None, None] * nc + np.arange(nc)[None, :, None]) * J3 + cols[:, None, :]
     Hcp += np.bincount(flat.ravel(), blk.ravel(), minlength=Hcp.size).reshape(Hcp.shape)
-    Hpp = np.zeros((p.G, J3, J3))
-    pp = Jp.transpose(0, 2, 1) @ Jp
-    flat = (p.o_group[:, None, None] * J3 + cols[:, :, None]) * J3 + cols[:, None, :]
-    Hpp += np.bincount(flat.ravel(), pp.ravel(), minlength=p.G * J3 * J3).reshape(p.G, J3, J3)
+    # the point blocks, with the group's log scale as the last row and column (filled below); a reprojection
+    # only touches the 3 x 3 block of its own joint
+    Hpp = np.zeros((p.G, J3 + 1, J3 + 1))
+    Hpp_joints = Hpp[:, :J3, :J3].reshape(p.G, NUM_JOINTS, 3, NUM_JOINTS, 3)  # a view
+    joint_blocks = np.zeros((p.G * NUM_JOINTS, 3, 3))
+    _scatter_blocks(joint_blocks, p.o_group * NUM_JOINTS + p.o_joint, Jp.transpose(0, 2, 1) @ Jp)
+    every_joint = np.arange(NUM_JOINTS)
+    Hpp_joints[:, every_joint, :, every_joint, :] += joint_blocks.reshape(p.G, NUM_JOINTS, 3, 3).transpose(1, 0, 2, 3)
     gp = np.bincount((p.o_group[:, None] * J3 + cols).ravel(), np.einsum("ori,or->oi", Jp, r).ravel(),
                      minlength=p.G * J3).reshape(p.G, J3)
 
@@ -195,7 +201,8 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
          + sw2[:, None, None] * np.outer(c, c)[None])  # (S, 23, 23) = D^T W^2 D
     M_group = np.zeros((p.G, NUM_JOINTS, NUM_JOINTS))
     _scatter_blocks(M_group, p.s_group, M)
-    Hpp += (M_group[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]).reshape(p.G, J3, J3)
+    for axis in range(3):  # M kron I_3
+        Hpp_joints[:, :, axis, :, axis] += M_group
     y = (ws * qs[:, None])[..., None] * (rs @ Rs)  # w_k q R^T r_k
     _scatter_blocks(gp, p.s_group, (y - c[None, :, None] * y.sum(1, keepdims=True)).reshape(S, J3))
     Z = (ws * qs[:, None])[..., None, None] * np.einsum("skri,sra->skia", Jsc, Rs)  # Jsc_k^T w_k q R
@@ -214,11 +221,8 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     _scatter_blocks(xq, p.s_group, (wrel - c[None, :, None] * wrel.sum(1, keepdims=True)).reshape(S, J3))
     if not p.free_scale:
         hqq, gq, xq = np.ones(p.G), np.zeros(p.G), np.zeros((p.G, J3))
-    Hpp_ext = np.zeros((p.G, J3 + 1, J3 + 1))
-    Hpp_ext[:, :J3, :J3] = Hpp
-    Hpp_ext[:, J3, :J3] = Hpp_ext[:, :J3, J3] = xq
-    Hpp_ext[:, J3, J3] = hqq
-    Hpp = Hpp_ext
+    Hpp[:, J3, :J3] = Hpp[:, :J3, J3] = xq
+    Hpp[:, J3, J3] = hqq
     gp = np.concatenate([gp, gq[:, None]], axis=1)
     Hcp = np.concatenate([Hcp, np.zeros((p.G, p.V, nc, 1))], axis=3)
 
@@ -241,19 +245,23 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
 
 
 def _solve(Hcc, Hcp, Hpp, gc, gp, lam):
+    """The damped Gauss-Newton step by the Schur complement over the point blocks: camera step (V, nc), point
+    step (G, 23, 3), log-scale step (G,), and the reduced camera system S (V nc, V nc).
+
+    One batched solve gives ``Hpp^-1 [Hcp^T | gp]`` per group (no explicit inverse: half the work)."""
     V, nc = gc.shape
     G, J3 = gp.shape
     n = V * nc
     Hpp_d = Hpp + lam * (np.diagonal(Hpp, axis1=1, axis2=2)[..., None] * np.eye(J3) + 1e-9 * np.eye(J3))
-    Hpp_inv = np.linalg.inv(Hpp_d)
     B = Hcp.reshape(G, n, J3)
+    solved = np.linalg.solve(Hpp_d, np.concatenate([B.transpose(0, 2, 1), gp[:, :, None]], axis=2))
+    Hi_Bt, Hi_gp = solved[..., :n], solved[..., n]  # (G, J3, n), (G, J3)
     S = np.zeros((n, n))
     for v in range(V):
         S[v * nc : (v + 1) * nc, v * nc : (v + 1) * nc] = Hcc[v]
     S += lam * np.diag(np.maximum(np.diag(S), 1e-12))
-    BHi = B @ Hpp_inv  # (G, n, J3)
-    S -= BHi.transpose(1, 0, 2).reshape(n, G * J3) @ B.transpose(1, 0, 2).reshape(n, G * J3).T
-    rhs = -gc.reshape(n) + np.einsum("gnj,gj->n", BHi, gp)
+    S -= B.transpose(1, 0, 2).reshape(n, G * J3) @ Hi_Bt.reshape(G * J3, n)
+    rhs = -gc.reshape(n) + np.einsum("gnj,gj->n", B, Hi_gp)
     dc = np.linalg.solve(S + 1e-12 * np.eye(n), rhs)
-    dp = -np.einsum("gij,gj->gi", Hpp_inv, gp + np.einsum("gnj,n->gj", B, dc))
+    dp = -(Hi_gp + Hi_Bt @ dc)  # Hpp^-1 (gp + Hcp^T dc)
     return dc.reshape(V, nc), dp[:, :-1].reshape(G, NUM_JOINTS, 3), dp[:, -1], S

@@ -93,7 +93,7 @@ class BodyFitConfig:
     iterations_3d: int = 300
     half_rate_fraction_3d: float = 0.8
     iterations_global: int = 10
-    iterations_body: int = 30
+    iterations_body: int = 20
     learning_rate_3d: float = 0.05
     fit_shape: bool = True
     cameras: str = "int_ext"
