@@ -206,6 +206,7 @@ class BodyFitSettings(dg.Config):
     fit_shape: bool = library_field(_B, "fit_shape")
     cameras: str = library_field(_B, "cameras")
     refine_k1: bool = library_field(_B, "refine_k1")
+    bundle_start: bool = library_field(_B, "bundle_start")
     rounds: int = library_field(_B, "rounds")
     iterations_cameras: int = library_field(_B, "iterations_cameras")
     weight_camera_prior: float = library_field(_B, "weight_camera_prior")

@@ -75,11 +75,11 @@ PRIOR_ABLATIONS = ("no_local_linear", "basic_gru", "no_skip")
 
 SECTIONS: tuple[Section, ...] = (
     Section("Cameras", ("shelf", "panoptic"), CAMERA_METRICS,
-            methods=("init", "separate", "ext", "int_ext", "bundle_int_ext", "int_ext_known_pp", "per_frame_prior",
+            methods=("init", "separate", "ext", "int_ext", "int_ext_no_bundle", "int_ext_known_pp", "per_frame_prior",
                      "no_prior", *PRIOR_ABLATIONS, "gt_cameras"),
             paper_peers=True),
     Section("PCP", ("shelf", "campus"), ("pcp_actor1", "pcp_actor2", "pcp_actor3", "pcp_avg", "mpjpe_mm"),
-            methods=("gt_cameras", "ext", "int_ext", "bundle_int_ext", "int_ext_known_pp", "separate",
+            methods=("gt_cameras", "ext", "int_ext", "int_ext_no_bundle", "int_ext_known_pp", "separate",
                      "per_frame_prior", "no_prior", *PRIOR_ABLATIONS, "skeletons3d"),
             paper_peers=True, peers_here=True),
     Section("Ablations", ("shelf", "synthetic", "mhhi", "human36m", "3dhp"),

@@ -244,6 +244,16 @@ class BodyModel:
         """
         return self._forward_kinematics(rest, bone_rotmats_local, root_translation_m)[1]
 
+    def bone_world_rotations(self, rest: RestSkeleton, bone_rotmats_local: Tensor, root_translation_m: Tensor) -> Tensor:
+        """World rotation of each posed bone relative to the reference pose (what turns a bone-fixed offset).
+
+        Args and Raises: as :meth:`keypoints`.
+
+        Returns:
+            (P, F, B, 3, 3).
+        """
+        return self._forward_kinematics(rest, bone_rotmats_local, root_translation_m)[0]
+
     def keypoints_and_joints(
         self, rest: RestSkeleton, bone_rotmats_local: Tensor, root_translation_m: Tensor
     ) -> tuple[Tensor, Tensor]:

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
+import torch
 from torch import Tensor
 
 __all__ = ["RestSkeleton"]
@@ -49,3 +50,29 @@ class RestSkeleton:
     def detach(self) -> "RestSkeleton":
         """The same skeletons cut from the autograd graph (e.g. for a fixed-shape stage of a fit)."""
         return RestSkeleton(**{f.name: getattr(self, f.name).detach() for f in fields(self)})
+
+    def dominant_bones(self) -> Tensor:
+        """(P, K) the posed bone each keypoint follows most (the largest ``keypoint_affine`` weight)."""
+        return self.keypoint_affine.argmax(dim=-1)
+
+    def with_keypoint_offsets(self, offsets_m: Tensor) -> "RestSkeleton":
+        """The same skeletons with each keypoint moved by an offset that turns with its dominant bone.
+
+        A detector trained on another definition of the joints (a hip centre placed elsewhere in the pelvis, say)
+        sees every person's keypoint a little away from the body model's, by an offset fixed in the bone that
+        carries it. With ``G_b`` the world rotation of keypoint ``k``'s dominant bone ``b`` relative to the
+        reference pose, the keypoint becomes ``kp_k + G_b @ offsets_m[k]``.
+
+        Args:
+            offsets_m: (K, 3) or (P, K, 3) offsets in the axes of the reference pose (X to the body's left, Y to
+                its back, Z up), metres; differentiable.
+
+        Returns:
+            A :class:`RestSkeleton` whose keypoints carry the offsets (every other field shared).
+        """
+        P, K, B, _ = self.keypoint_linear_m.shape
+        if offsets_m.shape not in ((K, 3), (P, K, 3)):
+            raise ValueError(f"offsets_m must have shape ({K}, 3) or ({P}, {K}, 3), got {tuple(offsets_m.shape)}")
+        offsets = offsets_m.to(self.keypoint_linear_m).expand(P, K, 3)
+        placed = torch.nn.functional.one_hot(self.dominant_bones(), B).to(offsets)  # (P, K, B)
+        return replace(self, keypoint_linear_m=self.keypoint_linear_m + placed[..., None] * offsets[:, :, None, :])

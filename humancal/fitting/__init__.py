@@ -3,8 +3,8 @@
 ``body_observations`` gathers what the association found (each person's detections in every view, their
 triangulated joints); ``fit_bodies`` fits shape and motion through the motion prior and, unless told to hold them,
 refines the cameras together with the people (``CameraVariables``); ``FittedMotions`` is the result and its
-``motions`` table. ``bundle_adjust`` refines the cameras on the triangulated joints alone (the "separate"
-baseline).
+``motions`` table. ``bundle_adjust`` refines the cameras on the triangulated joints alone: where moving cameras
+start (``BodyFitConfig.bundle_start``), and the "separate" baseline.
 """
 
 from humancal.fitting.bundle import BundleResult, bundle_adjust

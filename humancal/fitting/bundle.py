@@ -1,4 +1,5 @@
-"""Bundle adjustment of the cameras on the triangulated keypoints: the paper's "separate" baseline.
+"""Bundle adjustment of the cameras on the triangulated keypoints: the start of the joint refinement
+(``BodyFitConfig.bundle_start``) and, followed by bodies with these cameras held, the paper's "separate" baseline.
 
 The cameras are refined first, on their own, against free 3D points (the association's triangulated joints,
 one point per person, frame and keypoint) and the same confidence-weighted Geman-McClure reprojection as the body

@@ -12,7 +12,7 @@ _INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iteratio
                    "iterations_cameras", "rounds")
 _CHOICE_FIELDS = {"cameras": ("fixed", "ext", "int_ext"),  # humancal.fitting.cameras.CAMERA_REGIMES
                   "latent_start": ("prior_mean", "reference_pose")}
-_BOOL_FIELDS = ("fit_shape", "refine_k1", "unswap_left_right")
+_BOOL_FIELDS = ("fit_shape", "refine_k1", "unswap_left_right", "bundle_start")
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,10 @@ class BodyFitConfig:
         cameras: which camera parameters move (``humancal.fitting.cameras``): ``fixed``, ``ext`` (extrinsics) or
             ``int_ext`` (focal length and extrinsics: fully self-calibrated).
         refine_k1: whether each view's first radial distortion coefficient moves too (with ``ext``/``int_ext``).
+        bundle_start: whether moving cameras (``ext``, ``int_ext``) first take a bundle adjustment on the
+            triangulated joints as free points (:func:`humancal.fitting.bundle.bundle_adjust`, regime ``cameras``)
+            before the joint refinement starts from them. Free points take up a detector's own definition of the
+            joints, which the bodies cannot (``docs/refinement.md``, "A detector with its own joints").
         rounds: how many times the three substages on the 2D detections (cameras, global, body) run in turn
             (with ``fixed`` cameras, the camera substage is skipped).
         iterations_cameras: L-BFGS iterations of the camera substage (bodies held).
@@ -98,6 +102,7 @@ class BodyFitConfig:
     fit_shape: bool = True
     cameras: str = "int_ext"
     refine_k1: bool = False
+    bundle_start: bool = True
     rounds: int = 3
     iterations_cameras: int = 50
     weight_camera_prior: float = 1e-4

@@ -14,7 +14,11 @@ smoothness term; for long sequences cut into windows (``humancal.prior.windows``
 interpenetration of different people (``humancal.fitting.contact``); and, when the cameras move, a weak tie of
 each camera to its initial value.
 
-Schedule: the root of each frame starts from a rigid alignment of the average body onto the triangulated
+Schedule: when the cameras move, they first take a bundle adjustment on the triangulated joints as free points
+(``BodyFitConfig.bundle_start``, :func:`humancal.fitting.bundle.bundle_adjust`: the ``separate`` baseline's
+cameras), and the joint refinement starts from there (chosen on synthetic scenes whose detector has its own
+definition of the joints, where a body cannot explain what free points can; ``docs/refinement.md``). The root of
+each frame starts from a rigid alignment of the average body onto the triangulated
 joints (``skeletons3d``); then three stages run on all people and all windows at once:
 
 1. ``fit3d``: shape, root and body pose on the triangulated joints, by Adam (cheap and well conditioned, but
@@ -50,6 +54,7 @@ from torch import Tensor
 from humancal.body import BodyModel, RestSkeleton
 from humancal.camera import CameraRig
 from humancal.calibration.types import FOOT_JOINTS
+from humancal.fitting.bundle import bundle_adjust
 from humancal.fitting.cameras import CameraVariables
 from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.contact import interpenetration
@@ -81,8 +86,8 @@ class BodyFitResult:
         cameras: the cameras after the fit (the initial ones when ``BodyFitConfig.cameras`` is ``fixed``), in the
             same world as the motions.
         latents: (P, W, L, latent_dim) the fitted latent windows (prior fits), else None.
-        stage_seconds: wall seconds of ``prepare``, each stage of ``STAGES`` (summed over rounds), ``floor`` and
-            ``total``.
+        stage_seconds: wall seconds of ``bundle`` (the bundle-adjusted start of moving cameras; 0 otherwise),
+            ``prepare``, each stage of ``STAGES`` (summed over rounds), ``floor`` and ``total``.
         loss_terms: every term of the objective after the last stage (unweighted), and ``total`` (weighted).
         reprojection_error_px: mean pixel distance between the fitted keypoints and the detected ones, over every
             detected keypoint (score > 0) in front of its camera.
@@ -397,6 +402,12 @@ def fit_bodies(
         raise FittingInputError("body fit: no detected keypoint with a score > 0 among the associated detections")
     seconds: dict[str, float] = {}
     start = time.perf_counter()
+    seconds["bundle"] = 0.0
+    if config.bundle_start and config.cameras != "fixed":
+        rig = bundle_adjust(observations, rig, config, regime=config.cameras).cameras
+        seconds["bundle"] = time.perf_counter() - start
+        log.info("body fit: cameras bundle-adjusted on the triangulated joints in %.1f s", seconds["bundle"])
+    prepare_start = time.perf_counter()
     if config.unswap_left_right:
         observations, swapped = unswap_left_right(observations, rig, min_error_px=config.noise_px)
         log.info("body fit: %d detection(s) with left and right swapped back", swapped)
@@ -404,7 +415,7 @@ def fit_bodies(
         prior = prior.to(dtype=body.dtype, device=body.device).eval()
     problem = _Problem(body, observations, rig, prior, config)
     problem.encode_pose()  # prior fits: from here the body pose is the latent motion
-    seconds["prepare"] = time.perf_counter() - start
+    seconds["prepare"] = time.perf_counter() - prepare_start
     terms: dict[str, float] = {}
     for stage in STAGES:
         seconds[stage] = 0.0

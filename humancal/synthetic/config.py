@@ -106,6 +106,11 @@ class DetectorNoise:
             than a whole skeleton.
         false_positive_score_mean: mean joint confidence of a false positive, in [0, 1].
         flip_rate: probability that a detection has its left and right labels swapped.
+        keypoint_bias_m: std per axis of each keypoint's systematic offset from the body model's keypoint, metres
+            (0: none). A real detector is trained on its own definition of the joints (where a hip or an ankle
+            is); the offsets are drawn once per scene, in the axes of the keypoint's dominant bone, the same for
+            every person and frame, and mirrored between left and right
+            (:func:`humancal.synthetic.noise.draw_keypoint_bias`). The ground truth keeps the model's keypoints.
     """
 
     jitter_std_frac: float = 0.008
@@ -125,6 +130,7 @@ class DetectorNoise:
     false_positive_fragment_prob: float = 0.5
     false_positive_score_mean: float = 0.4
     flip_rate: float = 0.02
+    keypoint_bias_m: float = 0.0
 
     def __post_init__(self) -> None:
         owner = "DetectorNoise"
@@ -148,6 +154,7 @@ class DetectorNoise:
             _check_range(owner, name, getattr(self, name), 0.0, 1.0)
         _check_range(owner, "min_visible_joints", self.min_visible_joints, 1, 23, integer=True)
         _check_range(owner, "false_positives_per_image", self.false_positives_per_image, 0.0, 20.0)
+        _check_range(owner, "keypoint_bias_m", self.keypoint_bias_m, 0.0, 0.2)
 
     @classmethod
     def none(cls) -> DetectorNoise:

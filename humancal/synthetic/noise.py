@@ -31,7 +31,7 @@ from humancal.keypoints import FLIP_INDEX, JOINT_INDEX, NUM_JOINTS, joint_indice
 from humancal.synthetic.config import DetectorNoise
 from humancal.synthetic.occlusion import occlusion_degree
 
-__all__ = ["DetectorNoise", "DetectorOutput", "JOINT_NOISE_WEIGHTS", "simulate_detections"]
+__all__ = ["DetectorNoise", "DetectorOutput", "JOINT_NOISE_WEIGHTS", "draw_keypoint_bias", "simulate_detections"]
 
 _COCO_SIGMAS = np.array(
     [0.026, 0.025, 0.025, 0.035, 0.035, 0.079, 0.079, 0.072, 0.072, 0.062, 0.062]
@@ -92,6 +92,19 @@ class DetectorOutput:
     def num_detections(self) -> int:
         """N."""
         return int(self.frame.shape[0])
+
+
+def draw_keypoint_bias(std_m: float, rng: np.random.Generator) -> np.ndarray:
+    """A detector's systematic keypoint offsets (``DetectorNoise.keypoint_bias_m``): (23, 3) metres, in the axes
+    of the reference pose (X to the body's left), mirrored between left and right (a right keypoint's offset is
+    its left twin's with X negated; a middle keypoint's X is 0), Gaussian with ``std_m`` per axis."""
+    offsets = rng.normal(0.0, std_m, size=(NUM_JOINTS, 3))
+    mirrored = offsets[list(FLIP_INDEX)] * np.array([-1.0, 1.0, 1.0])
+    middle = np.arange(NUM_JOINTS) == np.asarray(FLIP_INDEX)
+    offsets[middle, 0] = 0.0
+    right = np.array([name.startswith("right_") for name in JOINT_INDEX])
+    offsets[right] = mirrored[right]
+    return offsets
 
 
 def _fold_radius(distortion: np.ndarray) -> float:

@@ -21,7 +21,7 @@ from humancal.camera import Camera, cameras_to_table
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
 from humancal.synthetic.config import OUT_OF_VIEW_DURATION_S, SceneConfig
 from humancal.synthetic.motions import Motions, generate_motions
-from humancal.synthetic.noise import DetectorOutput, simulate_detections
+from humancal.synthetic.noise import DetectorOutput, draw_keypoint_bias, simulate_detections
 from humancal.synthetic.people import People, sample_people
 from humancal.synthetic.rigs import make_rig
 from humancal.tables import validate_table
@@ -69,6 +69,8 @@ class SyntheticScene:
         detector: the :class:`DetectorOutput` (per-detection arrays and per-view truth: visibility,
             occlusion, eligibility, flips).
         det_id: (N,) the det_id of each detection of ``detector``.
+        keypoint_bias_m: (23, 3) the detector's keypoint offsets in their bones, metres
+            (``DetectorNoise.keypoint_bias_m``; zeros without a bias).
     """
 
     config: SceneConfig
@@ -89,6 +91,7 @@ class SyntheticScene:
     activity: np.ndarray
     detector: DetectorOutput
     det_id: np.ndarray
+    keypoint_bias_m: np.ndarray
 
     def summary(self) -> dict[str, float | int]:
         """Counts and realised noise rates (for logs and asset metadata)."""
@@ -247,7 +250,10 @@ def generate_scene(
         raise ValueError(f"sequence must be a non-empty string, got {sequence!r}")
     report = progress or (lambda stage, fraction: None)
     # a sixth stream for the out-of-view spells leaves the first five (and older scenes) as they were
-    rng_people, rng_motion, rng_rig, rng_noise, rng_ids, rng_absence = np.random.default_rng(config.seed).spawn(6)
+    # spawned streams do not depend on how many are spawned: a seventh (the detector's keypoint bias) leaves the
+    # first six as they were
+    streams = np.random.default_rng(config.seed).spawn(7)
+    rng_people, rng_motion, rng_rig, rng_noise, rng_ids, rng_absence, rng_bias = streams
     started = time.perf_counter()
 
     people = sample_people(body, config.num_people, rng_people, config.height_range_m)
@@ -261,7 +267,17 @@ def generate_scene(
     rig = make_rig(config, rng_rig)
     report("cameras", 0.45)
     hidden = _out_of_view(config, rng_absence)
-    detector = simulate_detections(motions.keypoints_world_m, people.height_m, rig, config.noise, rng_noise, hidden)
+    detected_m, bias_m = motions.keypoints_world_m, np.zeros((NUM_JOINTS, 3))
+    if config.noise.keypoint_bias_m > 0:  # what the detector calls a joint: the model's keypoints moved in the bones
+        bias_m = draw_keypoint_bias(config.noise.keypoint_bias_m, rng_bias)
+        offsets = torch.as_tensor(bias_m, dtype=body.dtype, device=body.device)
+        with torch.no_grad():
+            detected_m = body.keypoints(rest.with_keypoint_offsets(offsets),
+                                        torch.as_tensor(motions.bone_rotmats_local, dtype=body.dtype,
+                                                        device=body.device),
+                                        torch.as_tensor(motions.root_translation_m, dtype=body.dtype,
+                                                        device=body.device)).double().cpu().numpy()
+    detector = simulate_detections(detected_m, people.height_m, rig, config.noise, rng_noise, hidden)
     det_id = _assign_det_ids(detector.frame, detector.view, rng_ids)
     report("detections", 0.8)
 
@@ -284,6 +300,7 @@ def generate_scene(
         activity=motions.activity,
         detector=detector,
         det_id=det_id,
+        keypoint_bias_m=bias_m,
     )
     report("tables", 1.0)
     logger.info(

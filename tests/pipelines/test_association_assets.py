@@ -22,7 +22,7 @@ ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_association
           "gt_camera_triangulation", "associations", "skeletons3d", "fitted_motions", "refined_cameras", "metric_tables",
           "method_tables"]
 FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10, "iterations_cameras": 5}
-METHODS = ["separate", "bundle_int_ext", "no_prior"]
+METHODS = ["separate", "int_ext_no_bundle", "no_prior"]
 """A shorter fit than the default (the test checks the wiring and sane figures; ``tests/humancal/fitting`` and
 ``scripts/body_sweep.py`` measure the fit itself)."""
 

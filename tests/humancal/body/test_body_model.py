@@ -220,3 +220,33 @@ def test_bad_inputs_raise_value_error(body_model, argument, bad, message):
 def test_rest_argument_must_be_a_rest_skeleton(body_model):
     with pytest.raises(ValueError, match="rest must be a RestSkeleton"):
         body_model.keypoints(torch.zeros(1, 6), body_model.identity_pose(1, 1), torch.zeros(1, 1, 3))
+
+
+def test_keypoint_offsets_turn_with_their_dominant_bone(body_model, generator):
+    rest = body_model.rest_skeleton(torch.full((2, 6), 0.5, dtype=body_model.dtype))
+    rotations, translations = random_pose(body_model, 2, 3, generator)
+    rotations, translations = rotations.to(body_model.dtype), translations.to(body_model.dtype)
+    plain = body_model.keypoints(rest, rotations, translations)
+    zero = body_model.keypoints(rest.with_keypoint_offsets(torch.zeros(NUM_JOINTS, 3, dtype=body_model.dtype)),
+                                rotations, translations)
+    torch.testing.assert_close(zero, plain)
+    hip = JOINT_INDEX["left_hip"]
+    bone = int(rest.dominant_bones()[0, hip])
+    assert body_model.posed_bones[bone] == "upperleg01.L"
+    offsets = torch.zeros(NUM_JOINTS, 3, dtype=body_model.dtype)
+    offsets[hip] = torch.tensor([0.02, -0.01, 0.03], dtype=body_model.dtype)
+    moved = body_model.keypoints(rest.with_keypoint_offsets(offsets), rotations, translations)
+    # the world rotation of the upper leg: the chain of local rotations from the root (local-ref composition)
+    chain, b = [], bone
+    while b >= 0:
+        chain.append(b)
+        b = body_model.posed_parents[b]
+    world = rotations[:, :, chain[-1]]
+    for b in reversed(chain[:-1]):
+        world = world @ rotations[:, :, b]
+    torch.testing.assert_close(body_model.bone_world_rotations(rest, rotations, translations)[:, :, bone], world)
+    expected = plain.clone()
+    expected[:, :, hip] += torch.einsum("pfij,j->pfi", world, offsets[hip])
+    torch.testing.assert_close(moved, expected, atol=TOLERANCE_M, rtol=0)
+    with pytest.raises(ValueError, match="offsets_m must have shape"):
+        rest.with_keypoint_offsets(torch.zeros(NUM_JOINTS, 2, dtype=body_model.dtype))

@@ -58,14 +58,22 @@ def test_joint_refinement_brings_perturbed_cameras_back(body_model, scene_inputs
     _, observations, rig = scene_inputs
     start = _perturbed(rig)
     before = _mean_errors(start, rig)
-    config = FAST.replace(cameras="int_ext", rounds=BodyFitConfig().rounds)
+    # the joint refinement by itself (no bundle-adjusted start)
+    config = FAST.replace(cameras="int_ext", rounds=BodyFitConfig().rounds, bundle_start=False)
     fit = fit_bodies(body_model, observations, start, shipped_prior()[0], config)
     after = _mean_errors(fit.cameras, rig)
     # position and angle at least halve, the focal error drops (3 views, 40 frames: weakly observed)
     for name in ("position_error_mm", "angle_error_deg"):
         assert after[name] < 0.5 * before[name], (name, before, after)
     assert after["focal_error_pct"] < 0.8 * before["focal_error_pct"], (before, after)
-    assert fit.stage_seconds["cameras"] > 0
+    assert fit.stage_seconds["cameras"] > 0 and fit.stage_seconds["bundle"] == 0.0
+    # the pipeline's schedule: a bundle adjustment first, then the same refinement
+    scheduled = fit_bodies(body_model, observations, start, shipped_prior()[0], config.replace(bundle_start=True))
+    assert scheduled.stage_seconds["bundle"] > 0
+    after = _mean_errors(scheduled.cameras, rig)
+    for name in ("position_error_mm", "angle_error_deg"):
+        assert after[name] < 0.5 * before[name], (name, before, after)
+    assert after["focal_error_pct"] < before["focal_error_pct"], (before, after)
     ext = fit_bodies(body_model, observations, start, shipped_prior()[0], config.replace(cameras="ext"))
     np.testing.assert_allclose(ext.cameras.K, start.K)  # focal known: held
 
