@@ -37,12 +37,15 @@ class BundleResult:
         points_world_m: (P, T, 23, 3) the refined points (NaN where no triangulated joint was given).
         reprojection_error_px: mean pixel distance of the refined points to their detections (confident ones).
         seconds: wall time.
+        failure: why the adjustment was undone (its objective became non-finite: the cameras and points are then
+            the initial ones), else None.
     """
 
     cameras: CameraRig
     points_world_m: np.ndarray
     reprojection_error_px: float
     seconds: float
+    failure: str | None = None
 
 
 def bundle_adjust(observations: BodyObservations, rig: CameraRig, config: BodyFitConfig = BodyFitConfig(), *,
@@ -96,13 +99,24 @@ def bundle_adjust(observations: BodyObservations, rig: CameraRig, config: BodyFi
     def closure() -> torch.Tensor:
         optimizer.zero_grad(set_to_none=True)
         loss = objective()
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"bundle adjustment: the objective became {loss.item()}")
         loss.backward()
         return loss
 
-    optimizer.step(closure)
+    variables = [*cams.variables(), free]
+    snapshot = [v.detach().clone() for v in variables]
+    failure = None
+    try:
+        optimizer.step(closure)
+    except FloatingPointError as error:  # back to the start: never a rig of non-finite cameras
+        failure = f"{error}; the initial cameras were kept"
+        with torch.no_grad():
+            for variable, saved in zip(variables, snapshot):
+                variable.copy_(saved)
     with torch.no_grad():
         r2, w = residuals()
         error = float(r2[w > 0].sqrt().mean())
         out = torch.full_like(points, float("nan"))
         out[valid] = free
-    return BundleResult(cams.to_rig(), out.numpy(), error, time.perf_counter() - start)
+    return BundleResult(cams.to_rig(), out.numpy(), error, time.perf_counter() - start, failure)

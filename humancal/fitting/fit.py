@@ -376,12 +376,14 @@ def fit_bodies(
     warnings: tuple[str, ...] = (),
     progress: Callable[[str, int, float], None] | None = None,
 ) -> BodyFitResult:
-    """Fit every person's shape and motion to their detections, the cameras held fixed (module docstring).
+    """Fit every person's shape and motion to their detections, and refine the cameras with them unless
+    ``config.cameras`` is ``fixed`` (module docstring).
 
     Args:
         body: the body model (its dtype and device are the fit's).
         observations: the people's detections and triangulated joints (:func:`body_observations`).
-        rig: the V cameras, held fixed.
+        rig: the V initial cameras (held with ``cameras="fixed"``; with moving cameras, bundle-adjusted first when
+            ``config.bundle_start``, and the adjustment's failure, if any, is one of the result's warnings).
         prior: the motion VAE whose latents are fitted (the default prior, or the per-frame variant, whose
             latents then get no local-linear term: the baseline without dynamics); None fits raw joint angles (the
             no-prior baseline). Its weights are not changed.
@@ -403,10 +405,16 @@ def fit_bodies(
     seconds: dict[str, float] = {}
     start = time.perf_counter()
     seconds["bundle"] = 0.0
+    fit_warnings = list(warnings)
     if config.bundle_start and config.cameras != "fixed":
-        rig = bundle_adjust(observations, rig, config, regime=config.cameras).cameras
+        bundle = bundle_adjust(observations, rig, config, regime=config.cameras)
+        rig = bundle.cameras
         seconds["bundle"] = time.perf_counter() - start
-        log.info("body fit: cameras bundle-adjusted on the triangulated joints in %.1f s", seconds["bundle"])
+        if bundle.failure:
+            fit_warnings.append(bundle.failure)
+            log.warning("body fit: %s", bundle.failure)
+        else:
+            log.info("body fit: cameras bundle-adjusted on the triangulated joints in %.1f s", seconds["bundle"])
     prepare_start = time.perf_counter()
     if config.unswap_left_right:
         observations, swapped = unswap_left_right(observations, rig, min_error_px=config.noise_px)
@@ -438,7 +446,6 @@ def fit_bodies(
         log.info("body fit, %s: %s in %.1f s", stage, ", ".join(f"{k} {v:.4g}" for k, v in terms.items()),
                  time.perf_counter() - stage_start)
     stage_start = time.perf_counter()
-    fit_warnings = list(warnings)
     if problem.cameras.moves:
         floor = _level_floor(problem)
         if floor is None:

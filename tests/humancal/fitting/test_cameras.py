@@ -86,3 +86,18 @@ def test_bundle_adjustment_on_triangulated_joints(scene_inputs):  # noqa: F811
     assert after["angle_error_deg"] < 0.5 * before["angle_error_deg"], (before, after)
     assert result.reprojection_error_px < 8.0
     assert np.isfinite(result.points_world_m[observations.joints_valid]).all()
+
+
+def test_a_bundle_adjustment_that_fails_keeps_the_initial_cameras_and_says_so(body_model, scene_inputs):  # noqa: F811
+    from dataclasses import replace
+
+    _, observations, rig = scene_inputs
+    start = _perturbed(rig)
+    keypoints = observations.keypoints_px.copy()
+    v, p, t, j = np.argwhere((observations.confidence > 0) & observations.joints_valid[None])[0]
+    keypoints[v, p, t, j] = np.nan  # a non-finite objective from the first evaluation
+    broken = replace(observations, keypoints_px=keypoints)
+    result = bundle_adjust(broken, start, BodyFitConfig(), iterations=5)
+    assert result.failure is not None and "the objective became nan" in result.failure
+    np.testing.assert_allclose(result.cameras.K, start.K)
+    np.testing.assert_allclose(result.cameras.t_cam_from_world_m, start.t_cam_from_world_m, atol=1e-12)
