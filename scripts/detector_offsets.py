@@ -31,22 +31,21 @@ from humancal.fitting import BodyFitConfig, body_observations, fit_bodies
 from humancal.keypoints import CANONICAL_JOINTS
 from humancal.lifter import lifted_from_table
 from humancal.prior import shipped_prior
-from pipelines.definitions import artifacts_root
-from resources.io_managers import partition_path
+from humancal.settings import state_dir
 
 
-def _table(artifacts: str, asset: str, partition: str) -> pd.DataFrame:
-    path = partition_path(artifacts, asset, partition)
-    if not path.exists():
+def _table(root: Path, asset: str, partition: str) -> pd.DataFrame:
+    path = root / "artifacts" / asset / f"{partition}.parquet"
+    if not path.is_file():
         raise SystemExit(f"{path} does not exist: materialize the partition first (humancal update --partition "
                          f"{partition})")
-    return pd.read_parquet(str(path))
+    return pd.read_parquet(path)
 
 
-def keypoint_offsets_table(artifacts: str, partition: str, fps: float) -> pd.DataFrame:
+def keypoint_offsets_table(root: Path, partition: str, fps: float) -> pd.DataFrame:
     """Per keypoint: detections, the median offset (mm, bone axes), its norm and the rms distance (mm)."""
-    dense, lifted = lifted_from_table(_table(artifacts, "detections", partition))
-    cameras = cameras_from_table(_table(artifacts, "gt_cameras", partition))
+    dense, lifted = lifted_from_table(_table(root, "detections", partition))
+    cameras = cameras_from_table(_table(root, "gt_cameras", partition))
     if not cameras:
         raise SystemExit(f"{partition}: no known cameras (gt_cameras is empty): the diagnostic needs them")
     rig = CameraRig.from_cameras(cameras)
@@ -82,8 +81,7 @@ def main() -> None:
     parser.add_argument("--state-dir", type=Path, default=None, help="default: the project's state dir")
     parser.add_argument("--fps", type=float, default=25.0, help="the sequence's frame rate (default 25)")
     args = parser.parse_args()
-    artifacts = str(args.state_dir / "artifacts") if args.state_dir else artifacts_root()
-    table = keypoint_offsets_table(artifacts, args.partition, args.fps)
+    table = keypoint_offsets_table(args.state_dir or state_dir(), args.partition, args.fps)
     print(table.to_markdown(floatfmt=".1f"))
     print(f"median over keypoints of the offset's norm: {table['median_norm_mm'].median():.1f} mm")
 
