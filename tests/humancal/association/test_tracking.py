@@ -372,7 +372,7 @@ def test_seeded_scenes(body_model, people, views, seed):
 def test_stitching_joins_only_the_same_body_within_reach():
     """Unit rule of the stitching: a track that starts after another ended continues it only with the same bone
     lengths, within the window, and within walking distance."""
-    from humancal.association.tracking import _stitch_tracks
+    from humancal.association.tracks import _stitch_tracks
 
     rng = np.random.default_rng(0)
     body = rng.normal(0, 0.3, (NUM_JOINTS, 3)) + [0.0, 0.0, 1.0]
