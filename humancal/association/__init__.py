@@ -2,14 +2,11 @@
 
 from humancal.association.affinity import (
     AffinityConfig,
-    DetectionGeometry,
     PairAffinities,
     combine_affinity,
     cross_view_pairs,
-    detection_geometry,
     detection_track_affinity,
     pair_affinities,
-    rigid_residual_rms_m,
 )
 from humancal.association.cycle_matching import (
     FrameMatching,
@@ -23,6 +20,7 @@ from humancal.association.cycle_matching import (
     round_to_clusters,
     solve_relaxation_cvxpy,
 )
+from humancal.association.detection_geometry import DetectionGeometry, detection_geometry
 from humancal.association.track_smoothing import SmoothingConfig, smooth_tracks
 from humancal.association.tracking import (
     SKELETONS3D_SCHEMA,
@@ -43,7 +41,6 @@ __all__ = [
     "detection_geometry",
     "detection_track_affinity",
     "pair_affinities",
-    "rigid_residual_rms_m",
     "smooth_tracks",
     "FrameMatching",
     "MatchingConfig",

@@ -29,24 +29,22 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
+from humancal.association.detection_geometry import DetectionGeometry, detection_geometry
 from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
+from humancal.geometry.alignment import best_rotation_trace
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
 
 __all__ = [
     "AffinityConfig",
-    "DetectionGeometry",
     "PairAffinities",
     "combine_affinity",
     "cross_view_pairs",
-    "detection_geometry",
     "pair_affinities",
     "detection_track_affinity",
-    "rigid_residual_rms_m",
 ]
 
 logger = logging.getLogger(__name__)
@@ -121,123 +119,6 @@ class AffinityConfig:
         return self.pose_weight > 0.0
 
 
-@dataclass(frozen=True)
-class DetectionGeometry:
-    """What the affinity needs of each detection, in the world frame (row ``d`` = detection row ``d``).
-
-    Attributes:
-        frame, view: (D,) int.
-        scores: (D, 23) joint confidences, 0 where absent.
-        centres_world_m: (D, 3) centre of the camera of each detection's view, metres.
-        rays_world: (D, 23, 3) unit directions of the joints' back-projected rays (float32; NaN where absent).
-        moments_world_m: (D, 23, 3) Plücker moments ``centre x direction`` of those rays (float32), metres.
-        pose_world_m: (D, 23, 3) lifted pose, root-relative, turned into the world (NaN where not lifted).
-        root_world_m: (D, 3) the lifted pose's hip midpoint placed by fitting it to the 2D keypoints (NaN where
-            not lifted or not placeable), metres.
-    """
-
-    frame: np.ndarray
-    view: np.ndarray
-    scores: np.ndarray
-    centres_world_m: np.ndarray
-    rays_world: np.ndarray
-    moments_world_m: np.ndarray
-    pose_world_m: np.ndarray
-    root_world_m: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.frame.shape[0])
-
-    @property
-    def pose_valid(self) -> np.ndarray:
-        """(D,) whether the detection has a lifted pose and a placed root."""
-        return np.isfinite(self.pose_world_m).all((1, 2)) & np.isfinite(self.root_world_m).all(1)
-
-
-def _normalized_image_points(keypoints_px: np.ndarray, view: np.ndarray, rig: CameraRig) -> np.ndarray:
-    """(D, 23, 2) ``K^-1`` image coordinates, lens distortion undone with OpenCV where the camera has one."""
-    K = rig.K[view]
-    xy = np.empty_like(keypoints_px)
-    xy[..., 0] = (keypoints_px[..., 0] - K[:, None, 0, 2]) / K[:, None, 0, 0]
-    xy[..., 1] = (keypoints_px[..., 1] - K[:, None, 1, 2]) / K[:, None, 1, 1]
-    for v in np.flatnonzero(np.abs(rig.distortion).sum(1) > 0):
-        rows = np.flatnonzero(view == v)
-        pts = keypoints_px[rows].reshape(-1, 1, 2)
-        finite = np.isfinite(pts).all(-1)[:, 0]
-        out = np.full(pts.shape, np.nan)
-        if finite.any():
-            out[finite] = cv2.undistortPoints(pts[finite], rig.K[v], rig.distortion[v])
-        xy[rows] = out.reshape(len(rows), NUM_JOINTS, 2)
-    return xy
-
-
-def _place_roots(joints_cam_m: np.ndarray, xy: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(D, 3) translation ``t`` (camera frame, metres) with ``joints + t`` projecting onto ``xy`` (weighted linear
-    least squares of ``(X + t)_x - x (X + t)_z = 0`` and the same in y); NaN where it is not determined or lies
-    behind the camera."""
-    x, y = xy[..., 0], xy[..., 1]
-    w = np.where(np.isfinite(x) & np.isfinite(y) & np.isfinite(joints_cam_m).all(-1), weights, 0.0)
-    x, y = np.where(w > 0, x, 0.0), np.where(w > 0, y, 0.0)
-    X = np.where(w[..., None] > 0, joints_cam_m, 0.0)
-    # rows of the system per joint: [1, 0, -x] t = x Z - X and [0, 1, -y] t = y Z - Y; normal equations summed
-    bx, by = x * X[..., 2] - X[..., 0], y * X[..., 2] - X[..., 1]
-    sw, swx, swy = w.sum(1), (w * x).sum(1), (w * y).sum(1)
-    AtA = np.zeros((len(w), 3, 3))
-    AtA[:, 0, 0] = AtA[:, 1, 1] = sw
-    AtA[:, 0, 2] = AtA[:, 2, 0] = -swx
-    AtA[:, 1, 2] = AtA[:, 2, 1] = -swy
-    AtA[:, 2, 2] = (w * (x * x + y * y)).sum(1)
-    Atb = np.stack([(w * bx).sum(1), (w * by).sum(1), -(w * (x * bx + y * by)).sum(1)], -1)
-    ok = (w > 0).sum(1) >= 2
-    t = np.full(Atb.shape, np.nan)
-    if ok.any():
-        t[ok] = np.linalg.solve(AtA[ok] + 1e-12 * np.eye(3), Atb[ok][..., None])[..., 0]
-    t[~(t[:, 2] > 0)] = np.nan
-    return t
-
-
-def detection_geometry(detections: DenseDetections, lifted: LiftedPoses | None, rig: CameraRig) -> DetectionGeometry:
-    """Rays, world poses and placed roots of every detection.
-
-    Args:
-        detections: D detections (any order; rows are kept).
-        lifted: their lifted poses (row-aligned; crop-frame poses are turned into camera frames with the rig's
-            intrinsics), or None for the geometric term only.
-        rig: the current cameras (view index = row of the rig).
-
-    Returns:
-        The :class:`DetectionGeometry`.
-
-    Raises:
-        ValueError: lifted poses not row-aligned, or a detection of a view the rig does not have.
-    """
-    D = len(detections)
-    view = np.asarray(detections.view, dtype=np.int64)
-    if D and (view.min() < 0 or view.max() >= len(rig)):
-        raise ValueError(f"detections use views {int(view.min())}..{int(view.max())} but the rig has "
-                         f"{len(rig)} cameras")
-    if lifted is not None and len(lifted) != D:
-        raise ValueError(f"lifted poses must be row-aligned with the detections: {len(lifted)} vs {D} rows")
-    scores = np.where(np.isfinite(detections.keypoints_px).all(-1), np.asarray(detections.scores, float), 0.0)
-    xy = _normalized_image_points(np.asarray(detections.keypoints_px, dtype=np.float64), view, rig)
-    R = rig.R_cam_from_world[view]
-    centres = rig.centers_world_m[view]
-    ray_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1)
-    rays = np.einsum("dji,dkj->dki", R, ray_cam)
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    rays[scores <= 0] = np.nan
-    moments = np.cross(centres[:, None, :], rays)
-    pose = np.full((D, NUM_JOINTS, 3), np.nan)
-    root = np.full((D, 3), np.nan)
-    if lifted is not None and D:
-        cam = lifted.in_camera_frame(rig.K[view])
-        t_cam = _place_roots(cam.joints_cam_m, xy, scores)
-        pose = np.einsum("dji,dkj->dki", R, cam.joints_cam_m)
-        root = np.einsum("dji,dj->di", R, t_cam - rig.t_cam_from_world_m[view])
-    return DetectionGeometry(np.asarray(detections.frame, dtype=np.int64), view, scores, centres,
-                             rays.astype(np.float32), moments.astype(np.float32), pose, root)
-
-
 def cross_view_pairs(frame: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every pair of detections of one frame in different views.
 
@@ -283,55 +164,6 @@ def _ray_similarity(geo: DetectionGeometry, a: np.ndarray, b: np.ndarray, scale_
     return sim, common
 
 
-def _det3(M: np.ndarray) -> np.ndarray:
-    """(...,) determinants of (..., 3, 3) matrices (elementwise: faster than LAPACK on many small ones)."""
-    return (M[..., 0, 0] * (M[..., 1, 1] * M[..., 2, 2] - M[..., 1, 2] * M[..., 2, 1])
-            - M[..., 0, 1] * (M[..., 1, 0] * M[..., 2, 2] - M[..., 1, 2] * M[..., 2, 0])
-            + M[..., 0, 2] * (M[..., 1, 0] * M[..., 2, 1] - M[..., 1, 1] * M[..., 2, 0]))
-
-
-def _nuclear_norm_rotation(M: np.ndarray) -> np.ndarray:
-    """(...,) ``max_R trace(R^T M)`` over rotations for (..., 3, 3) ``M``: ``s1 + s2 + sign(det M) s3``.
-
-    The singular values come from the closed-form eigenvalues of the symmetric ``M^T M`` (trigonometric solution
-    of its characteristic cubic), so no per-matrix decomposition runs.
-    """
-    S = np.swapaxes(M, -1, -2) @ M
-    q = np.trace(S, axis1=-2, axis2=-1) / 3.0
-    off = S[..., 0, 1] ** 2 + S[..., 0, 2] ** 2 + S[..., 1, 2] ** 2
-    p = np.sqrt(((S[..., 0, 0] - q) ** 2 + (S[..., 1, 1] - q) ** 2 + (S[..., 2, 2] - q) ** 2 + 2.0 * off) / 6.0)
-    safe_p = np.where(p > 0, p, 1.0)
-    Bm = (S - q[..., None, None] * np.eye(3)) / safe_p[..., None, None]
-    r = np.clip(_det3(Bm) / 2.0, -1.0, 1.0)
-    phi = np.arccos(r) / 3.0
-    e1 = q + 2.0 * p * np.cos(phi)
-    e3 = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
-    e2 = 3.0 * q - e1 - e3
-    singular = np.sqrt(np.maximum(np.stack([e1, e2, e3], -1), 0.0))
-    sign = np.where(_det3(M) < 0, -1.0, 1.0)
-    return singular[..., 0] + singular[..., 1] + sign * singular[..., 2]
-
-
-def rigid_residual_rms_m(source_m: np.ndarray, target_m: np.ndarray) -> np.ndarray:
-    """RMS joint distance after the best rigid motion of each source onto its target, batched, without an SVD.
-
-    With the centred points ``A``, ``B`` and ``M = A^T B`` the best rotation leaves the squared residual
-    ``|A|^2 + |B|^2 - 2 (s1 + s2 + sign(det M) s3)`` (``s``: singular values of ``M``, from a closed form).
-
-    Args:
-        source_m, target_m: (..., J, 3) corresponding points, finite, metres.
-
-    Returns:
-        (...,) RMS distance after alignment, metres (the same as
-        :func:`humancal.geometry.alignment.align_points` with ``with_scale=False``, then the RMS).
-    """
-    A = source_m - source_m.mean(-2, keepdims=True)
-    B = target_m - target_m.mean(-2, keepdims=True)
-    M = np.swapaxes(A, -1, -2) @ B
-    sq = (A * A).sum((-1, -2)) + (B * B).sum((-1, -2)) - 2.0 * _nuclear_norm_rotation(M)
-    return np.sqrt(np.maximum(sq, 0.0) / source_m.shape[-2])
-
-
 def _centred_poses(geo: DetectionGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per detection: (D, 23, 3) world pose minus its centroid, (D, 3) centroid, (D,) squared norm of the first."""
     mean = geo.pose_world_m.mean(1)
@@ -350,7 +182,7 @@ def _pose_similarity(geo: DetectionGeometry, centred: tuple[np.ndarray, np.ndarr
     base = norm2[a] + norm2[b]
     mean_gap = ((mean[a] - mean[b]) ** 2).sum(-1)
     pose_rms = np.sqrt(np.maximum((base - 2.0 * np.trace(M, axis1=1, axis2=2)) / NUM_JOINTS + mean_gap, 0.0))
-    shape_rms = np.sqrt(np.maximum(base - 2.0 * _nuclear_norm_rotation(M), 0.0) / NUM_JOINTS)
+    shape_rms = np.sqrt(np.maximum(base - 2.0 * best_rotation_trace(M), 0.0) / NUM_JOINTS)
     # the hip midpoints slide along their rays by one common factor (the lifter's size error is the person's)
     centre_gap = geo.centres_world_m[a] - geo.centres_world_m[b]
     ray_gap = (geo.root_world_m[a] - geo.centres_world_m[a]) - (geo.root_world_m[b] - geo.centres_world_m[b])

@@ -273,7 +273,6 @@ def _false_positives(
 
     K = np.stack([c.K for c in cameras])[view]
     R = np.stack([c.R_cam_from_world for c in cameras])[view]
-    t = np.stack([c.t_cam_from_world_m for c in cameras])[view]
     size = np.array([[c.width_px, c.height_px] for c in cameras], dtype=np.float64)[view]
     # The pose, centred on its pelvis and turned about the vertical, stands with its pelvis on the ray
     # through a random pixel at a random depth.

@@ -14,11 +14,10 @@ from humancal.association import (
     detection_geometry,
     detection_track_affinity,
     pair_affinities,
-    rigid_residual_rms_m,
 )
 from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
-from humancal.geometry.alignment import align_points
+from humancal.geometry.alignment import align_points, rigid_residual_rms_m
 from humancal.geometry.rotations import axis_angle_to_rotmat
 
 
