@@ -11,12 +11,8 @@ See ``docs/calibration.md`` for the method, the failure modes and measured figur
 """
 
 from humancal.calibration.alignment import Similarity, align_rig
-from humancal.calibration.extrinsics import (
-    ExtrinsicsConfig,
-    ExtrinsicsDiagnostics,
-    ExtrinsicsEstimate,
-    estimate_extrinsics,
-)
+from humancal.calibration.extrinsics import estimate_extrinsics
+from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
 from humancal.calibration.floor import FloorAlignment, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsConfig, IntrinsicsEstimate, estimate_intrinsics
 from humancal.calibration.plot import plot_rigs

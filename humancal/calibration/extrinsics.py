@@ -27,14 +27,14 @@ import logging
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
 import pandas as pd
 
 from humancal.calibration.blind_views import blind_views, other_views_focal, resection_pass, translations_from_others
-from humancal.calibration.floor import FloorAlignment, NoFloorError, align_to_floor
+from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
+from humancal.calibration.floor import NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
@@ -47,156 +47,9 @@ from humancal.detections import DenseDetections
 from humancal.keypoints import JOINT_INDEX
 from humancal.lifter.pose_cues import standing_score
 
-__all__ = ["ExtrinsicsConfig", "ExtrinsicsDiagnostics", "ExtrinsicsEstimate", "estimate_extrinsics"]
+__all__ = ["estimate_extrinsics"]
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class ExtrinsicsConfig:
-    """Settings of :func:`estimate_extrinsics`.
-
-    Attributes:
-        rotation_threshold_deg: consensus radius of the pairwise rotation vote, degrees.
-        max_pose_error_m: detection pairs whose aligned lifted poses differ more (RMS) are not the same person.
-        max_frames_per_pair: shared frames used per view pair for the rotation vote (all views: at most
-            ``max_pair_hypotheses`` pairs in total are kept by lowering it).
-        max_pair_hypotheses: budget of detection pairs over all view pairs for the rotation vote.
-        min_pair_support: a view pair needs this many supporting detections to be an edge.
-        linear_iterations: passes of (root positions, linear focal + translation solve).
-        linear_max_rel_std: a view whose linear focal has a larger data-only relative std is resected instead.
-        single_view_min_rel_std: floor on the prior std of well-conditioned single-view focal lengths. 0.3: on the
-            stress sweep's synthetic scenes (portrait images, cameras near the horizon or steeply down) 4 of the 13
-            single-view focal lengths that claimed to be good were 12-54 % off, and a 5 % prior dragged the bundle
-            adjustment after them; the views' multi-view data decide, the single-view value mainly starts them.
-        focal_range_rel: allowed focal range, multiples of the image diagonal (clips the initial values).
-        max_groups: matched groups used by the bundle adjustment (spread over the sequence).
-        shape_std_m: std of the lifted joints in the bundle adjustment, metres (chosen on seeded synthetic scenes
-            with the shipped lifter, docs/calibration.md).
-        person_scale_std: relative std of a lifted person's size (a lifter sees body proportions, not size): the
-            linear solve and the bundle adjustment estimate a size correction per matched pair / group with this
-            prior, so that people's size errors do not distort the rig; None: sizes taken as lifted.
-        bundle_iterations: Levenberg-Marquardt iterations.
-        max_focal_rel_std: a final focal with a larger relative std is reported as ``poorly_constrained``.
-        square_pixels: one focal per view (fx = fy).
-        align_floor: move the result to the Z-up, floor z = 0 frame (else camera 0 stays the world).
-        upright_threshold: groups whose reconstructed keypoints score at least this as standing
-            (:func:`~humancal.lifter.standing_score`) count as standing for the floor.
-        seed: randomness of the subsampling.
-        fov_range_deg: plausible horizontal field of view (narrowest, widest), degrees: bounds every focal in the
-            bundle adjustment (by its parameterization) and the focal a resection may start a view from.
-        blind_start_fov_deg: views that neither a single view, the linear solve nor a resection could estimate
-            start the bundle adjustment from the other views' field of view *and* from each of these diagonal
-            fields of view (degrees; the diagonal makes them the same for portrait and landscape images), with
-            translations solved again at those focal lengths; each start gets ``blind_start_iterations``
-            iterations and the lowest cost goes on. Empty: the other views' field of view only.
-        blind_start_iterations: bundle-adjustment iterations given to each start of the blind views.
-        mismatch_threshold_sigma: after the bundle adjustment, a detection whose keypoints reproject further from
-            its group's than this many keypoint stds (median; the std is 1 % of the person's image extent) is
-            taken out of its group and the bundle adjustment run again (a person matched to a neighbour, the
-            same way in every frame of a static scene, pulls the rig towards a wrong one); 0 turns this off.
-        mismatch_max_fraction: when more of the detections than this fraction are above the threshold, none is
-            taken out (the rig is off, not a few matches).
-        mismatch_rounds: at most this many rounds of taking out and adjusting again.
-    """
-
-    rotation_threshold_deg: float = 10.0
-    max_pose_error_m: float = 0.15
-    max_frames_per_pair: int = 200
-    max_pair_hypotheses: int = 150_000
-    min_pair_support: int = 5
-    linear_iterations: int = 6
-    linear_max_rel_std: float = 0.15
-    single_view_min_rel_std: float = 0.3
-    focal_range_rel: tuple[float, float] = (0.15, 5.0)
-    max_groups: int = 200
-    shape_std_m: float = 0.5
-    person_scale_std: float | None = 0.1
-    bundle_iterations: int = 40
-    max_focal_rel_std: float = 0.05
-    square_pixels: bool = True
-    align_floor: bool = True
-    upright_threshold: float = 0.5
-    seed: int = 0
-    fov_range_deg: tuple[float, float] = (10.0, 140.0)
-    blind_start_fov_deg: tuple[float, ...] = (50.0, 65.0, 80.0, 95.0, 115.0)
-    blind_start_iterations: int = 12
-    mismatch_threshold_sigma: float = 10.0
-    mismatch_max_fraction: float = 0.2
-    mismatch_rounds: int = 2
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.rotation_threshold_deg < 90.0:
-            raise ValueError(f"ExtrinsicsConfig.rotation_threshold_deg={self.rotation_threshold_deg} not in (0, 90)")
-        if self.max_groups < 3:
-            raise ValueError(f"ExtrinsicsConfig.max_groups={self.max_groups} must be >= 3")
-        if not 0.0 < self.focal_range_rel[0] < self.focal_range_rel[1]:
-            raise ValueError(f"ExtrinsicsConfig.focal_range_rel={self.focal_range_rel} must be 0 < low < high")
-        if not 0.0 < self.fov_range_deg[0] < self.fov_range_deg[1] < 180.0:
-            raise ValueError(f"ExtrinsicsConfig.fov_range_deg={self.fov_range_deg} must be 0 < narrowest < widest "
-                             "< 180 degrees")
-        if not (self.mismatch_threshold_sigma >= 0.0 and 0.0 < self.mismatch_max_fraction <= 1.0
-                and self.mismatch_rounds >= 0):
-            raise ValueError(f"ExtrinsicsConfig: mismatch_threshold_sigma={self.mismatch_threshold_sigma} must be >= 0 "
-                             f"(0: off), mismatch_max_fraction={self.mismatch_max_fraction} in (0, 1], "
-                             f"mismatch_rounds={self.mismatch_rounds} >= 0")
-
-    def replace(self, **changes) -> ExtrinsicsConfig:
-        """A validated copy with some fields changed."""
-        return replace(self, **changes)
-
-
-@dataclass(frozen=True)
-class ExtrinsicsDiagnostics:
-    """What :func:`estimate_extrinsics` found along the way.
-
-    Attributes:
-        per_view: one row per view: ``view``, ``focal_single_view_px``, ``single_view_status``,
-            ``focal_linear_px``, ``focal_px`` (final), ``focal_rel_std`` (final), ``focal_status`` (``"ok"`` or
-            ``"poorly_constrained"``), ``focal_source`` (how the bundle adjustment was started:
-            ``"single_view+bundle"`` (a well-conditioned single-view focal, also its prior), ``"linear+bundle"``,
-            ``"resection+bundle"`` (recovered from the people placed by the other views) or
-            ``"other_views+bundle"`` (neither the linear solve nor a resection gave a plausible focal: started
-            from the other views' median field of view, left to the bundle adjustment)),
-            ``bundle_status`` (``"ok"``, ``"focal_at_bound"``, ``"behind_camera"``, ``"no_inliers"``: see
-            :class:`~humancal.calibration.multiview_focal.BundleResult`; anything but ``"ok"`` makes the
-            ``focal_status`` ``"poorly_constrained"``), ``reprojection_rms_px``, ``rotation_edges``.
-        pairs: one row per view pair: ``view_a``, ``view_b``, ``support``, ``residual_deg`` (disagreement of the
-            pair rotation with the averaged rotations; NaN when unused).
-        groups: the matched detections used: ``frame``, ``view``, ``det_id``, ``group``.
-        floor: the :class:`FloorAlignment` (None when ``align_floor`` is off or no floor was found).
-        world_frame: ``"floor"`` (Z up, floor at z = 0, origin on the floor amid the people) or ``"camera_0"``
-            (camera 0 at the origin looking along +z, OpenCV axes: ``align_floor`` off, or no floor found).
-        floor_problem: why no floor was found (None when one was, or when not asked for).
-        people_world_m: (G, 3) the matched groups' hip midpoints in the returned world frame, metres.
-        body_size_ratio: median over the groups of their triangulated limb lengths over their lifted ones (the
-            lifter sees body proportions and sizes the people): about 1 for a consistent rig; far from 1, the
-            cameras and the people disagree (a wrong solution, whatever its reprojection error).
-        bundle_inlier_fraction: keypoints within the Huber threshold in the bundle adjustment.
-        mismatched_detections: detections taken out of their groups after a bundle adjustment (reprojected over
-            ``mismatch_threshold_sigma`` stds away: matched to the wrong person); ``groups`` is without them.
-        timings_s: seconds per step.
-    """
-
-    per_view: pd.DataFrame
-    pairs: pd.DataFrame
-    groups: pd.DataFrame
-    floor: FloorAlignment | None
-    bundle_inlier_fraction: float
-    timings_s: dict[str, float] = field(default_factory=dict)
-    world_frame: str = "floor"
-    floor_problem: str | None = None
-    people_world_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    body_size_ratio: float = float("nan")
-    mismatched_detections: int = 0
-
-
-@dataclass(frozen=True)
-class ExtrinsicsEstimate:
-    """Calibrated cameras (intrinsics refined by the multi-view step) and diagnostics."""
-
-    cameras: list[Camera]
-    diagnostics: ExtrinsicsDiagnostics
 
 
 def _check_inputs(detections: DenseDetections, lifted: LiftedPoses, intrinsics: Sequence[IntrinsicsEstimate]) -> int:
