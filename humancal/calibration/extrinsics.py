@@ -217,6 +217,36 @@ def _initial_points(groups, lifted, roots_T, view, R, t):
     return pts
 
 
+def _world_frame(ba, V, config):
+    """Step 5: the bundle adjustment's cameras and people moved to the floor's frame (Z up, floor at z = 0), or
+    left in camera 0's frame when ``config.align_floor`` is off or the people give no floor (said in a warning).
+
+    Returns:
+        ``(R_final, t_final, floor, floor_problem, people)``: the cameras' rotations and translations, the
+        :class:`~humancal.calibration.floor.FloorAlignment` (None: no floor), why no floor was found (None when one
+        was, or when not asked for) and the groups' (G, 3) hip midpoints, all in the returned world frame.
+    """
+    R_final, t_final = ba.R_cam_from_world, ba.t_cam_from_world_m
+    floor, floor_problem = None, None
+    if config.align_floor:
+        # standing from the reconstructed (triangulated) keypoints: body-internal, camera-free
+        standing = standing_score(ba.points_world_m)
+        with _stage("floor alignment"):
+            try:
+                floor = align_to_floor(ba.points_world_m, standing, R_final[0],
+                                       upright_threshold=config.upright_threshold)
+            except NoFloorError as error:  # the cameras hold: keep camera 0's frame and say so
+                floor_problem = str(error)
+                logger.warning("no floor found (%s): the cameras are returned in camera 0's frame", error)
+        if floor is not None:
+            R_final, t_final = floor.apply_to_camera(R_final, t_final)
+    people = hip_midpoints(ba.points_world_m)
+    if floor is not None:
+        people = (people - floor.origin_old_m) @ floor.Q_new_from_old.T
+        _require_finite(np.c_[R_final.reshape(V, -1), t_final], "floor alignment")
+    return R_final, t_final, floor, floor_problem, people
+
+
 def estimate_extrinsics(
     detections: DenseDetections,
     lifted: LiftedPoses,
@@ -375,24 +405,7 @@ def estimate_extrinsics(
     timings["bundle"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
-    R_final, t_final = ba.R_cam_from_world, ba.t_cam_from_world_m
-    floor, floor_problem = None, None
-    if config.align_floor:
-        # standing from the reconstructed (triangulated) keypoints: body-internal, camera-free
-        standing = standing_score(ba.points_world_m)
-        with _stage("floor alignment"):
-            try:
-                floor = align_to_floor(ba.points_world_m, standing, R_final[0],
-                                       upright_threshold=config.upright_threshold)
-            except NoFloorError as error:  # the cameras hold: keep camera 0's frame and say so
-                floor_problem = str(error)
-                logger.warning("no floor found (%s): the cameras are returned in camera 0's frame", error)
-        if floor is not None:
-            R_final, t_final = floor.apply_to_camera(R_final, t_final)
-    people = hip_midpoints(ba.points_world_m)
-    if floor is not None:
-        people = (people - floor.origin_old_m) @ floor.Q_new_from_old.T
-        _require_finite(np.c_[R_final.reshape(V, -1), t_final], "floor alignment")
+    R_final, t_final, floor, floor_problem, people = _world_frame(ba, V, config)
     timings["floor"] = time.perf_counter() - clock
 
     cameras = [
