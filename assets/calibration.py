@@ -151,7 +151,7 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
 
 @sequence_asset(
     "cameras",
-    code_version="6",
+    code_version="7",
     check_specs=[
         dg.AssetCheckSpec("cameras_valid", asset="extrinsics", blocking=True,
                           description="finite positive focal, principal point inside, right-handed rotations"),
@@ -237,7 +237,8 @@ def _focal_constrained_report(per_view: pd.DataFrame) -> CheckReport:
     return CheckReport(
         loose.empty,
         "every focal is determined to 5 %" if loose.empty else "; ".join(
-            f"view {r.view}: focal {r.focal_px:.0f} px +- {100 * r.focal_rel_std:.0f} % (too few matched people?)"
+            f"view {r.view}: focal {r.focal_px:.0f} px +- {100 * r.focal_rel_std:.0f} % (too few matched people, "
+            "or people who hardly move?)"
             for r in loose.itertuples()),
         {"max_focal_rel_std": float(per_view["focal_rel_std"].max())},
         checked=len(per_view),

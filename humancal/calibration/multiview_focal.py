@@ -58,6 +58,10 @@ from humancal.geometry.rotations import rotvec_to_rotmat
 
 __all__ = ["BundleResult", "bundle_adjust", "focal_bounds_from_fov"]
 
+_REPEAT_DISTANCE_M = 0.1
+"""Two groups whose keypoints are this close on average (metres) repeat one another (one still person seen in two
+frames): their lifter and detector errors are the same, so they count as one in the focal uncertainty."""
+
 logger = logging.getLogger(__name__)
 
 
@@ -307,11 +311,16 @@ def _focal_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
     correlated over its 23 joints, so the shape term's information is counted as one joint's per lifted pose
     (its full weight made the focal lengths of near-planar rigs look determined to 1 % when they were 20 % off);
     and the pixel noise is the one the residuals show (the variance factor of the inlier reprojections), not the
-    one assumed, when it is larger.
+    one assumed, when it is larger. Third, a person who does not move (seated, standing still) gives the same group
+    frame after frame, with the same lifter and detector errors: each group's information is divided by the
+    number of groups that repeat it (:func:`_repeats`), so that a static scene counts its people once, not once
+    per frame.
     """
     V, nc = prob.V, cams.shape[1]
     nf = nc - 6
-    honest = replace(prob, shape_w=prob.shape_w / np.sqrt(prob.shape_w.shape[1]))
+    share = 1.0 / np.sqrt(_repeats(X))  # (G,) whitened residuals scaled: information / repeats
+    honest = replace(prob, shape_w=prob.shape_w / np.sqrt(prob.shape_w.shape[1]) * share[prob.s_group, None],
+                     o_w=prob.o_w * share[prob.o_group])
     try:
         Hcc, Hcp, Hpp, gc, gp, _, _ = _normal_equations(honest, cams, R0, X, log_q, free)
         _, _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
@@ -328,6 +337,20 @@ def _focal_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
     dlogf = _log_focal(prob, cams[:, :nf])[1][:, 0]
     diag = np.array([cov[v * nc, v * nc] for v in range(V)])
     return np.sqrt(np.maximum(diag, 0.0) * max(variance_factor, 1.0)) * dlogf
+
+
+def _repeats(X: np.ndarray, distance_m: float = _REPEAT_DISTANCE_M) -> np.ndarray:
+    """(G,) how many groups (itself included) lie within ``distance_m`` of each group: the mean distance of their
+    23 keypoints (NaN-free joints of both; (G, 23, 3) ``X``, metres)."""
+    finite = np.isfinite(X).all(-1)
+    Xf = np.where(finite[..., None], X, 0.0)
+    counts = np.ones(len(X), np.int64)
+    for g in range(len(X)):  # one row of the (G, G) distances at a time: memory linear in the groups
+        both = finite[g] & finite  # (G, 23)
+        distance = np.linalg.norm(Xf - Xf[g], axis=-1)
+        mean = (distance * both).sum(-1) / np.maximum(both.sum(-1), 1)
+        counts[g] = max(int(((mean < distance_m) & both.any(-1)).sum()), 1)
+    return counts
 
 
 def _damped_step(prob, Hcc, Hcp, Hpp, gc, gp, lam, cams, R0, X, log_q, huber):

@@ -117,3 +117,29 @@ def test_a_singular_stage_becomes_a_calibration_error(ring_scene, ring_stand_in,
 def test_fov_range_is_validated():
     with pytest.raises(ValueError, match="fov_range_deg"):
         ExtrinsicsConfig(fov_range_deg=(10.0, 190.0))
+
+
+def test_a_still_person_seen_in_many_frames_counts_once_in_the_focal_uncertainty(ring_problem):
+    """The same groups repeated 9 times (what people who do not move give, frame after frame) carry their lifter and
+    detector errors 9 times over: the focal lengths must not look 3 times better determined than from one copy."""
+    p = ring_problem
+    once = bundle_adjust(p["d"], p["lifted"], p["groups"], p["points"], p["f"], p["f"], p["pp"], p["R"], p["t"])
+    copies = 9
+    repeated = bundle_adjust(p["d"], p["lifted"], p["groups"] * copies, np.concatenate([p["points"]] * copies),
+                             p["f"], p["f"], p["pp"], p["R"], p["t"])
+    np.testing.assert_allclose(repeated.fx_px, once.fx_px, rtol=1e-3)  # the same estimate
+    ratio = repeated.focal_rel_std / once.focal_rel_std
+    assert np.all(ratio > 0.8) and np.all(ratio < 1.25), ratio  # without the correction: 1 / sqrt(9) = 0.33
+
+
+def test_groups_repeat_one_another_only_when_their_keypoints_coincide():
+    from humancal.calibration.multiview_focal import _repeats
+
+    rng = np.random.default_rng(0)
+    person = rng.normal(size=(23, 3))
+    still = person + 0.01 * rng.normal(size=(5, 23, 3))  # one person, 5 frames, 1 cm of jitter
+    walking = person + np.array([0.3, 0.0, 0.0]) * np.arange(1, 4)[:, None, None]  # 30 cm apart
+    missing = still[:1].copy()
+    missing[0, :10] = np.nan  # joints absent in one group are not compared
+    counts = _repeats(np.concatenate([still, walking, missing, np.full((1, 23, 3), np.nan)]))
+    np.testing.assert_array_equal(counts, [6, 6, 6, 6, 6, 1, 1, 1, 6, 1])

@@ -36,7 +36,9 @@ def test_bundle_adjustment_recovers_perturbed_cameras(ring_scene, ring_stand_in,
     true_centres = np.stack([c.center_world_m for c in rig])
     assert np.linalg.norm(centres - true_centres, axis=1).max() < 0.1  # scale from the noisy lifted shapes
     assert np.all(res.reprojection_rms_px < 8) and res.inlier_fraction > 0.9
-    assert np.all(res.focal_rel_std < 0.02)
+    # the stated uncertainty: below the poorly-constrained label (5 %), and the errors within three of it
+    assert np.all(res.focal_rel_std < 0.05), res.focal_rel_std
+    assert np.all(np.abs(res.fx_px / f_true - 1) < 3 * res.focal_rel_std), (res.fx_px / f_true, res.focal_rel_std)
 
 
 def test_bundle_adjustment_with_wrong_people_sizes(ring_scene, ring_stand_in, ring_true_groups):
