@@ -55,7 +55,7 @@ def _weights(items: list[str]) -> dict[str, str]:
 
 
 def _tune(body, clips, priors, args) -> None:
-    train = [c for c in clips if c.subject not in HELD_OUT_CMU_SUBJECTS]
+    train = [c for c in clips if c.subject not in HELD_OUT_CMU_SUBJECTS and c.subject not in args.subjects]
     segments = motion_segments(train, args.frames, args.segments, seed=args.seed + 1)
     rows = []
     for setting in args.settings:
@@ -91,10 +91,16 @@ def main() -> None:
     parser.add_argument("--settings", default="3d,2d", help="comma-separated: 3d, 2d")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument(
+        "--subjects", default=",".join(HELD_OUT_CMU_SUBJECTS),
+        help="subjects evaluated, comma-separated (default the held-out test subjects; a validation subject when "
+             "choosing training settings: scripts/train_prior.py --exclude-subjects)",
+    )
     parser.add_argument("--tune", action="store_true", help="grid of fit weights on training-subject segments")
     parser.add_argument("--no-denoise", action="store_true", help="reconstruction only")
     args = parser.parse_args()
     args.settings = [s for s in args.settings.split(",") if s]
+    args.subjects = tuple(s for s in args.subjects.split(",") if s)
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(args.threads)
 
@@ -107,8 +113,10 @@ def main() -> None:
     if args.tune:
         _tune(body, clips, priors, args)
         return
-    held = [c for c in clips if c.subject in HELD_OUT_CMU_SUBJECTS]
-    print(f"held-out subjects {', '.join(HELD_OUT_CMU_SUBJECTS)}: {len(held)} clips, "
+    held = [c for c in clips if c.subject in args.subjects]
+    if not held:
+        raise SystemExit(f"--subjects {','.join(args.subjects)}: no clip of these subjects in {args.motions_table}")
+    print(f"evaluated subjects {', '.join(args.subjects)}: {len(held)} clips, "
           f"{sum(len(c.root_translation_m) for c in held)} frames")
     recon = []
     for variant, prior in priors.items():

@@ -80,13 +80,20 @@ def main() -> None:
     parser.add_argument(
         "--held-out-subjects", default=",".join(HELD_OUT_CMU_SUBJECTS), help="held-out subjects, comma-separated"
     )
+    parser.add_argument(
+        "--exclude-subjects", default="",
+        help="subjects left out of training and scoring altogether, comma-separated (choosing settings on a "
+             "validation subject: exclude the test subjects 02,14 and hold out the validation one)",
+    )
     parser.add_argument("--epochs", type=int, help="override PriorConfig.epochs")
     parser.add_argument("--steps-per-epoch", type=int, help="override PriorConfig.steps_per_epoch")
     parser.add_argument("--learning-rate", type=float, help="override PriorConfig.learning_rate (peak)")
+    parser.add_argument("--weight-local-linear", type=float, help="override PriorConfig.weight_local_linear")
     parser.add_argument("--ship", action="store_true",
                         help="also write the shipped weights (humancal/weights/motion_prior.*); default variant only")
     args = parser.parse_args()
-    if args.ship and (args.variant != "motion_prior" or args.epochs or args.steps_per_epoch or args.learning_rate):
+    tuned = (args.epochs, args.steps_per_epoch, args.learning_rate, args.weight_local_linear, args.exclude_subjects)
+    if args.ship and (args.variant != "motion_prior" or any(v not in (None, "") for v in tuned)):
         parser.error("--ship is for the default configuration of the motion_prior variant")
     out = (args.out or _DEFAULT_DIR / args.variant).resolve()
     if out.is_relative_to(REPO_ROOT):
@@ -98,9 +105,14 @@ def main() -> None:
 
     body_model = BodyModel()
     clips = _retargeted_clips(args.motions_table, body_model)
+    excluded = {s for s in args.exclude_subjects.split(",") if s}
+    if excluded:
+        clips = [c for c in clips if c.subject not in excluded]
+        print(f"left out altogether: subjects {sorted(excluded)}")
     held_out = tuple(args.held_out_subjects.split(","))
     overrides = {k: v for k, v in (("epochs", args.epochs), ("steps_per_epoch", args.steps_per_epoch),
-                                   ("learning_rate", args.learning_rate)) if v}
+                                   ("learning_rate", args.learning_rate),
+                                   ("weight_local_linear", args.weight_local_linear)) if v is not None}
     config = PriorConfig.default(args.variant, args.seed).replace(**overrides)
     print(f"{len(clips)} clips, {sum(len(c.bone_rotmats_local) for c in clips)} frames; held out: {list(held_out)}")
     print(f"config {config.digest()}: variant {config.variant}, hidden {config.hidden_size}, latent "
@@ -108,7 +120,9 @@ def main() -> None:
           f"windows of {config.clip_frames} frames, {args.threads} thread(s)")
     trained = train_motion_prior(clips, config, body_model, progress=_print_epoch, held_out_subjects=held_out)
     command = f"python scripts/train_prior.py --variant {args.variant} --seed {args.seed} --threads {args.threads}"
-    info = {"trained_with": command + _overrides_text(overrides), "threads": args.threads}
+    extra = f" --held-out-subjects {args.held_out_subjects}" if held_out != tuple(HELD_OUT_CMU_SUBJECTS) else ""
+    extra += f" --exclude-subjects {','.join(sorted(excluded))}" if excluded else ""
+    info = {"trained_with": command + _overrides_text(overrides) + extra, "threads": args.threads}
     sidecar = save_prior(trained, out, info)
     if args.ship:
         save_prior(trained, SHIPPED_PRIOR_STEM, {**info, "trained_with": command + " --ship"})
