@@ -6,7 +6,7 @@ from pathlib import Path
 import dagster as dg
 
 from assets.common import REQUIRES_DATA_KEY, UPDATE_CONDITION, png_metadata, table_metadata, table_output
-from humancal.mocap import read_bvh
+from humancal.mocap import identical_files, read_bvh
 from humancal.retarget import RetargetConfig, clips_to_motions_table, plot_retarget, pooled_residual_mm, residual_summary, retarget_clips
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
@@ -29,6 +29,12 @@ def mocap_clips(context: dg.AssetExecutionContext, body_model: BodyModelResource
         raise FileNotFoundError(f"mocap_clips needs cmu_mocap/bvh_daz under the data root (HUMANCAL_DATA_DIR); looked in {folder}")
     paths = sorted(folder.rglob("*.bvh.gz"))
     context.log.info(f"retargeting {len(paths)} clips from {folder}")
+    same_takes = identical_files(paths)
+    for group in same_takes:
+        context.log.warning(
+            f"the same take under {len(group)} names: {', '.join(p.name for p in group)}; each is kept, so it counts "
+            f"{len(group)} times in its subject's shape fit and in any held-out figure (docs/mocap.md)"
+        )
 
     def progress(done: int, total: int, name: str) -> None:
         if done % 10 == 0 or done == total:
@@ -43,6 +49,7 @@ def mocap_clips(context: dg.AssetExecutionContext, body_model: BodyModelResource
         "frames": int(summary["frames"].sum()),
         "residual_median_mm": pooled["median_mm"],
         "residual_p95_mm": pooled["p95_mm"],
+        "identical_files": "; ".join(" = ".join(p.name for p in group) for group in same_takes) or "none",
         "per_clip": dg.MetadataValue.md(summary.to_markdown(index=False, floatfmt=".1f")),
     }
     shown = next((c for c in clips if c.name == PLOT_CLIP), clips[0])
