@@ -12,6 +12,7 @@ The clips come from the canonical motions table (``--motions-table``, the file `
 
     python scripts/eval_prior.py [--weights motion_prior=PATH ...] [--segments 16] [--frames 120] [--threads 2]
     python scripts/eval_prior.py --tune [--weights ...]
+    python scripts/eval_prior.py --subjects 06 --weights motion_prior=PATH   # a validation subject instead
 """
 
 from __future__ import annotations

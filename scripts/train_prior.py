@@ -12,7 +12,8 @@ repository. ``--ship`` also writes the weights humancal ships (``humancal/weight
 how the shipped weights were made.
 
     python scripts/train_prior.py [--variant motion_prior] [--seed 0] [--threads 2] [--out /tmp/humancal_prior/x]
-                                  [--epochs N] [--steps-per-epoch N] [--learning-rate LR]
+                                  [--epochs N] [--steps-per-epoch N] [--learning-rate LR] [--weight-local-linear W]
+                                  [--exclude-subjects 02,14 --held-out-subjects 06]   # settings chosen on a validation subject
     python scripts/train_prior.py --ship            # retrain the shipped weights
 """
 
@@ -93,7 +94,8 @@ def main() -> None:
                         help="also write the shipped weights (humancal/weights/motion_prior.*); default variant only")
     args = parser.parse_args()
     tuned = (args.epochs, args.steps_per_epoch, args.learning_rate, args.weight_local_linear, args.exclude_subjects)
-    if args.ship and (args.variant != "motion_prior" or any(v not in (None, "") for v in tuned)):
+    other_split = args.held_out_subjects != ",".join(HELD_OUT_CMU_SUBJECTS)
+    if args.ship and (args.variant != "motion_prior" or other_split or any(v not in (None, "") for v in tuned)):
         parser.error("--ship is for the default configuration of the motion_prior variant")
     out = (args.out or _DEFAULT_DIR / args.variant).resolve()
     if out.is_relative_to(REPO_ROOT):
