@@ -12,6 +12,8 @@ import hashlib
 from collections.abc import Sequence
 from pathlib import Path
 
+from humancal.mocap.clip import MocapFormatError
+
 __all__ = ["identical_files"]
 
 _CHUNK = 1 << 20
@@ -21,9 +23,12 @@ def _content_digest(path: Path) -> str:
     """SHA-256 of the file's content, decompressed first when the name ends in ``.gz``."""
     digest = hashlib.sha256()
     opener = gzip.open if path.suffix == ".gz" else open
-    with opener(path, "rb") as stream:
-        while chunk := stream.read(_CHUNK):
-            digest.update(chunk)
+    try:
+        with opener(path, "rb") as stream:
+            while chunk := stream.read(_CHUNK):
+                digest.update(chunk)
+    except (gzip.BadGzipFile, EOFError) as err:
+        raise MocapFormatError(path, None, f"a .gz name, but not a whole gzip stream ({err})") from err
     return digest.hexdigest()
 
 
@@ -39,7 +44,8 @@ def identical_files(paths: Sequence[Path | str]) -> list[tuple[Path, ...]]:
         in the order of their first file. Empty when every file is distinct.
 
     Raises:
-        OSError: a file cannot be read (``gzip.BadGzipFile`` for a ``.gz`` that is not gzip).
+        MocapFormatError: a ``.gz`` file that is not gzip or is cut short (the message names it).
+        OSError: a file cannot be read (missing, no permission).
     """
     groups: dict[str, list[Path]] = {}
     for path in map(Path, paths):

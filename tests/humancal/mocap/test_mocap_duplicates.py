@@ -6,7 +6,7 @@ import gzip
 
 import pytest
 
-from humancal.mocap import identical_files
+from humancal.mocap import MocapFormatError, identical_files
 
 
 def test_identical_files_groups_the_same_content_gzipped_or_not(tmp_path):
@@ -23,7 +23,13 @@ def test_identical_files_groups_the_same_content_gzipped_or_not(tmp_path):
     assert identical_files([str(p) for p in reversed(paths)]) == [(tmp_path / "c.bvh.gz", tmp_path / "a.bvh")]
 
 
-def test_identical_files_names_a_bad_gzip(tmp_path):
+def test_identical_files_names_a_bad_or_truncated_gzip(tmp_path):
     (tmp_path / "x.bvh.gz").write_bytes(b"not gzip at all")
-    with pytest.raises(gzip.BadGzipFile):
+    with pytest.raises(MocapFormatError, match=r"x\.bvh\.gz: a \.gz name, but not a whole gzip stream"):
         identical_files([tmp_path / "x.bvh.gz"])
+    whole = gzip.compress(b"HIERARCHY\n" * 1000)
+    (tmp_path / "cut.bvh.gz").write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(MocapFormatError, match=r"cut\.bvh\.gz"):
+        identical_files([tmp_path / "cut.bvh.gz"])
+    with pytest.raises(FileNotFoundError, match="missing.bvh"):
+        identical_files([tmp_path / "missing.bvh"])
