@@ -70,16 +70,51 @@ class CameraVariables:
         """The tensors a camera stage optimises (empty for ``fixed``)."""
         return [v for v in (self.log_focal, self.rotvec, self.centre_m, self.k1) if v.requires_grad]
 
+    _NAMES = ("log_focal", "rotvec", "centre_m", "k1")
+
+    def _moving(self) -> list[str]:
+        return [name for name in self._NAMES if getattr(self, name).requires_grad]
+
+    def parameters(self) -> Tensor:
+        """(V, p) the moving variables side by side (in ``log_focal, rotvec, centre_m, k1`` order; p = 0 for
+        ``fixed``), differentiable back to them."""
+        columns = [getattr(self, name) for name in self._moving()]
+        return torch.cat([c if c.ndim == 2 else c.unsqueeze(-1) for c in columns], dim=-1) if columns else \
+            self.log_focal.detach().new_zeros(len(self), 0)
+
+    def unpack(self, theta: Tensor) -> dict[str, Tensor]:
+        """All four variables (keyword arguments of :meth:`tensors_at`) with the moving ones read from ``theta``
+        ((V, p), as :meth:`parameters`) and the others at their current values."""
+        values, column = {name: getattr(self, name).detach() for name in self._NAMES}, 0
+        for name in self._moving():
+            width = 3 if values[name].ndim == 2 else 1
+            part = theta[:, column:column + width]
+            values[name] = part if width == 3 else part[:, 0]
+            column += width
+        return values
+
+    def assign(self, theta: Tensor) -> None:
+        """Set the moving variables to ``theta`` ((V, p), as :meth:`parameters`)."""
+        with torch.no_grad():
+            for name, value in self.unpack(theta).items():
+                if getattr(self, name).requires_grad:
+                    getattr(self, name).copy_(value)
+
     def tensors(self) -> RigTensors:
         """The current rig as differentiable tensors (:meth:`RigTensors.project` projects through it)."""
-        scale = torch.exp(self.log_focal)
-        K = self.K0.clone()
-        K[:, 0, 0] = self.K0[:, 0, 0] * scale
-        K[:, 1, 1] = self.K0[:, 1, 1] * scale
-        R = roma.rotvec_to_rotmat(self.rotvec) @ self.R0
-        t = -torch.einsum("vij,vj->vi", R, self.centre_m)
-        distortion = self.distortion0.clone()
-        distortion[:, 0] = self.k1
+        return self.tensors_at(self.log_focal, self.rotvec, self.centre_m, self.k1)
+
+    def tensors_at(self, log_focal: Tensor, rotvec: Tensor, centre_m: Tensor, k1: Tensor) -> RigTensors:
+        """The rig at other values of the variables (same shapes: (V,), (V, 3), (V, 3), (V,)), for solvers that
+        differentiate through it functionally (``torch.func``)."""
+        scale = torch.exp(log_focal)
+        # only fx and fy scale (the principal point and skew stay): K0 + diag(fx (s - 1), fy (s - 1), 0)
+        K = self.K0 + torch.diag_embed(torch.stack([self.K0[:, 0, 0] * (scale - 1.0),
+                                                    self.K0[:, 1, 1] * (scale - 1.0),
+                                                    torch.zeros_like(scale)], dim=-1))
+        R = roma.rotvec_to_rotmat(rotvec) @ self.R0
+        t = -torch.einsum("vij,vj->vi", R, centre_m)
+        distortion = torch.cat([k1.unsqueeze(-1), self.distortion0[:, 1:]], dim=-1)
         return RigTensors(K, R, t, distortion)
 
     def to_rig(self) -> CameraRig:

@@ -9,9 +9,10 @@ from typing import Any
 __all__ = ["BodyFitConfig"]
 
 _INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iterations_global", "iterations_body",
-                   "iterations_cameras", "rounds")
+                   "iterations_cameras", "rounds", "bundle_max_frames")
 _CHOICE_FIELDS = {"cameras": ("fixed", "ext", "int_ext"),  # humancal.fitting.cameras.CAMERA_REGIMES
-                  "latent_start": ("prior_mean", "reference_pose")}
+                  "latent_start": ("prior_mean", "reference_pose"),
+                  "bundle_solver": ("lm", "lbfgs")}
 _BOOL_FIELDS = ("fit_shape", "refine_k1", "unswap_left_right", "bundle_start")
 
 
@@ -64,6 +65,12 @@ class BodyFitConfig:
             triangulated joints as free points (:func:`humancal.fitting.bundle.bundle_adjust`, regime ``cameras``)
             before the joint refinement starts from them. Free points take up a detector's own definition of the
             joints, which the bodies cannot (``docs/refinement.md``, "A detector with its own joints").
+        bundle_solver: how that bundle adjustment is solved (``humancal.fitting.bundle``): ``lm``
+            (Levenberg-Marquardt with the points eliminated, run to convergence) or ``lbfgs`` (the earlier solver,
+            100 L-BFGS iterations, which stopped short of the minimum; ``docs/refinement.md``).
+        bundle_max_frames: that bundle adjustment uses every k-th frame, k = max(1, T // bundle_max_frames), so at
+            most ``2 * bundle_max_frames - 1`` frames (the cameras are static: a few hundred frames fix them, and
+            the solve costs in proportion to the frames).
         rounds: how many times the three substages on the 2D detections (cameras, global, body) run in turn
             (with ``fixed`` cameras, the camera substage is skipped).
         iterations_cameras: L-BFGS iterations of the camera substage (bodies held).
@@ -103,6 +110,8 @@ class BodyFitConfig:
     cameras: str = "int_ext"
     refine_k1: bool = False
     bundle_start: bool = True
+    bundle_solver: str = "lm"
+    bundle_max_frames: int = 300
     rounds: int = 3
     iterations_cameras: int = 50
     weight_camera_prior: float = 1e-4
@@ -133,6 +142,8 @@ class BodyFitConfig:
             raise ValueError(f"BodyFitConfig.half_rate_fraction_3d={self.half_rate_fraction_3d} must be in [0, 1]")
         if self.learning_rate_3d <= 0:
             raise ValueError("BodyFitConfig.learning_rate_3d must be > 0")
+        if self.bundle_max_frames < 1:
+            raise ValueError(f"BodyFitConfig.bundle_max_frames={self.bundle_max_frames} must be >= 1")
         if self.window_frames < 4 or not 0 <= self.window_overlap < self.window_frames // 2:
             raise ValueError(f"BodyFitConfig: window_frames={self.window_frames} must be >= 4 and window_overlap="
                              f"{self.window_overlap} in [0, window_frames / 2)")

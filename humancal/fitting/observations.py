@@ -68,9 +68,13 @@ class BodyObservations:
 
     def every_other_frame(self) -> BodyObservations:
         """The observations of frames 0, 2, 4, ... (``frames`` then steps by 2): the sequence at half its rate."""
-        return BodyObservations(self.person_ids, self.frames[::2], self.keypoints_px[:, :, ::2],
-                                self.confidence[:, :, ::2], self.joints_world_m[:, ::2], self.joints_valid[:, ::2],
-                                self.present[:, ::2])
+        return self.every_nth_frame(2)
+
+    def every_nth_frame(self, n: int) -> BodyObservations:
+        """The observations of frames 0, n, 2n, ... (``frames`` then steps by ``n`` >= 1)."""
+        return BodyObservations(self.person_ids, self.frames[::n], self.keypoints_px[:, :, ::n],
+                                self.confidence[:, :, ::n], self.joints_world_m[:, ::n], self.joints_valid[:, ::n],
+                                self.present[:, ::n])
 
 
 def body_observations(detections: DenseDetections, associations: pd.DataFrame, skeletons3d: pd.DataFrame,

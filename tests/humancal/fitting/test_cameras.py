@@ -68,12 +68,14 @@ def test_joint_refinement_brings_perturbed_cameras_back(body_model, scene_inputs
     assert after["focal_error_pct"] < 0.8 * before["focal_error_pct"], (before, after)
     assert fit.stage_seconds["cameras"] > 0 and fit.stage_seconds["bundle"] == 0.0
     # the pipeline's schedule: a bundle adjustment first, then the same refinement
+    # the pipeline's schedule: a bundle adjustment (run to convergence) first, then the same refinement. On three
+    # views of two people over 40 frames the free points' minimum is itself some way from the truth (the bundle
+    # test below), so here every figure must improve, not halve; the sweeps measure it (docs/refinement.md)
     scheduled = fit_bodies(body_model, observations, start, shipped_prior()[0], config.replace(bundle_start=True))
     assert scheduled.stage_seconds["bundle"] > 0
     after = _mean_errors(scheduled.cameras, rig)
-    for name in ("position_error_mm", "angle_error_deg"):
-        assert after[name] < 0.5 * before[name], (name, before, after)
-    assert after["focal_error_pct"] < before["focal_error_pct"], (before, after)
+    for name in ("position_error_mm", "angle_error_deg", "focal_error_pct"):
+        assert after[name] < before[name], (name, before, after)
     ext = fit_bodies(body_model, observations, start, shipped_prior()[0], config.replace(cameras="ext"))
     np.testing.assert_allclose(ext.cameras.K, start.K)  # focal known: held
 
@@ -81,11 +83,19 @@ def test_joint_refinement_brings_perturbed_cameras_back(body_model, scene_inputs
 def test_bundle_adjustment_on_triangulated_joints(scene_inputs):  # noqa: F811
     _, observations, rig = scene_inputs
     start = _perturbed(rig)
+    untouched = bundle_adjust(observations, start, BodyFitConfig(), iterations=0)
     result = bundle_adjust(observations, start, BodyFitConfig(), iterations=100)
-    before, after = _mean_errors(start, rig), _mean_errors(result.cameras, rig)
-    assert after["angle_error_deg"] < 0.5 * before["angle_error_deg"], (before, after)
-    assert result.reprojection_error_px < 8.0
+    lbfgs = bundle_adjust(observations, start, BodyFitConfig(bundle_solver="lbfgs"), iterations=100)
+    assert result.reprojection_error_px < 0.8 * untouched.reprojection_error_px
+    assert result.reprojection_error_px < lbfgs.reprojection_error_px < untouched.reprojection_error_px
     assert np.isfinite(result.points_world_m[observations.joints_valid]).all()
+    # converged: the same minimum as from the true cameras (where that minimum lies is the data's business), with
+    # the tie to each start made negligible so that both solve the same problem
+    untied = BodyFitConfig(weight_camera_prior=1e-8)
+    apart = _mean_errors(bundle_adjust(observations, start, untied, iterations=100).cameras,
+                         bundle_adjust(observations, rig, untied, iterations=100).cameras)
+    assert apart["angle_error_deg"] < 0.02 and apart["focal_error_pct"] < 0.05, apart
+    assert apart["position_error_mm"] < 2.0, apart
 
 
 def test_a_bundle_adjustment_that_fails_keeps_the_initial_cameras_and_says_so(body_model, scene_inputs):  # noqa: F811
@@ -101,3 +111,38 @@ def test_a_bundle_adjustment_that_fails_keeps_the_initial_cameras_and_says_so(bo
     assert result.failure is not None and "the objective became nan" in result.failure
     np.testing.assert_allclose(result.cameras.K, start.K)
     np.testing.assert_allclose(result.cameras.t_cam_from_world_m, start.t_cam_from_world_m, atol=1e-12)
+
+
+def test_the_levenberg_marquardt_bundle_reaches_the_exact_cameras_where_lbfgs_stops_short(body_model):
+    from humancal.detections import detections_to_dense
+    from humancal.fitting import body_observations
+    from humancal.synthetic import generate_scene, preset
+
+    scene = generate_scene(preset("tiny_clean"), body_model, sequence="clean")  # exact projections
+    rng = np.random.default_rng(0)
+    skeletons = scene.poses3d.assign(num_views=3)
+    skeletons[["x_m", "y_m", "z_m"]] += rng.normal(0.0, 0.02, (len(skeletons), 3))  # a triangulation's noise
+    observations, _ = body_observations(detections_to_dense(scene.detections), scene.associations, skeletons,
+                                        len(scene.rig))
+    rig = CameraRig.from_cameras(scene.rig)
+    start = _perturbed(rig)
+    config = BodyFitConfig(weight_camera_prior=1e-8)  # no pull back to the perturbed start
+    lm = bundle_adjust(observations, start, config.replace(bundle_solver="lm"), iterations=50)
+    lbfgs = bundle_adjust(observations, start, config.replace(bundle_solver="lbfgs"), iterations=50)
+    errors = _mean_errors(lm.cameras, rig)
+    assert lm.failure is None and lm.reprojection_error_px < 0.05, lm.reprojection_error_px
+    assert errors["angle_error_deg"] < 0.01 and errors["focal_error_pct"] < 0.05, errors
+    assert errors["position_error_mm"] < 1.0, errors
+    assert lbfgs.reprojection_error_px > 10 * lm.reprojection_error_px, (lbfgs.reprojection_error_px,
+                                                                          lm.reprojection_error_px)
+    # a long capture is adjusted on every k-th frame (here 20 frames, at most 5 -> every 4th): the others are NaN
+    sparse = bundle_adjust(observations, start, config.replace(bundle_max_frames=5), iterations=50)
+    assert np.isnan(sparse.points_world_m[:, 1:4]).all() and np.isnan(sparse.points_world_m[:, 5:8]).all()
+    assert np.isfinite(sparse.points_world_m[:, ::4][observations.joints_valid[:, ::4]]).all()
+    assert _mean_errors(sparse.cameras, rig)["angle_error_deg"] < 0.01
+    with pytest.raises(ValueError, match="BodyFitConfig.bundle_max_frames=0 must be >= 1"):
+        BodyFitConfig(bundle_max_frames=0)
+    with pytest.raises(ValueError, match="BodyFitConfig.bundle_solver='newton' must be one of"):
+        BodyFitConfig(bundle_solver="newton")
+    with pytest.raises(ValueError, match="the cameras must move"):
+        bundle_adjust(observations, start, config, regime="fixed")
