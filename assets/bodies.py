@@ -34,7 +34,7 @@ def _weights_digest(variant: str) -> str:
     return str(read_prior_info(SHIPPED_VARIANT_STEMS[variant])["digest"])[:12]
 
 
-CODE_VERSION = f"10-prior-{_weights_digest('motion_prior')}"
+CODE_VERSION = f"11-prior-{_weights_digest('motion_prior')}"
 """The code version names the shipped prior's weights digest: new weights make every fit stale."""
 
 

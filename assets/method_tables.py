@@ -44,7 +44,7 @@ def _prior_or_none(variant: str):
     partitions_def=SEQUENCES,
     group_name="benchmark",
     metadata={**table_metadata("metrics"), ON_REQUEST_KEY: "humancal benchmark"},
-    code_version="8",
+    code_version="9",
     description="The paper's regimes (ext, gt_cameras, init, separate, per_frame_prior, no_prior and the prior "
                 "ablations whose weights exist), and int_ext with the true principal points (a diagnostic), fitted "
                 "and scored on one sequence.",

@@ -114,7 +114,7 @@ class BodyFitConfig:
     bundle_max_frames: int = 300
     rounds: int = 3
     iterations_cameras: int = 50
-    weight_camera_prior: float = 1e-4
+    weight_camera_prior: float = 1e-6
     camera_prior_scale_m: float = 0.1
     weight_interpenetration: float = 0.0
     contact_scale_m: float = 0.01

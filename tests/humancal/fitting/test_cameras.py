@@ -69,13 +69,15 @@ def test_joint_refinement_brings_perturbed_cameras_back(body_model, scene_inputs
     assert fit.stage_seconds["cameras"] > 0 and fit.stage_seconds["bundle"] == 0.0
     # the pipeline's schedule: a bundle adjustment first, then the same refinement
     # the pipeline's schedule: a bundle adjustment (run to convergence) first, then the same refinement. On three
-    # views of two people over 40 frames the free points' minimum is itself some way from the truth (the bundle
-    # test below), so here every figure must improve, not halve; the sweeps measure it (docs/refinement.md)
+    # views of two people over 40 frames the data's own minimum is further from the truth than this perturbed start
+    # (the bundle test below), so the schedule is asked to find that minimum: the same cameras as from the truth
     scheduled = fit_bodies(body_model, observations, start, shipped_prior()[0], config.replace(bundle_start=True))
     assert scheduled.stage_seconds["bundle"] > 0
-    after = _mean_errors(scheduled.cameras, rig)
-    for name in ("position_error_mm", "angle_error_deg", "focal_error_pct"):
-        assert after[name] < before[name], (name, before, after)
+    from_truth = fit_bodies(body_model, observations, rig, shipped_prior()[0], config.replace(bundle_start=True))
+    apart = _mean_errors(scheduled.cameras, from_truth.cameras)
+    # (measured: 0.14 % / 2.8 mm / 0.10 deg apart, while both are about 1.1 % / 62 mm / 0.7 deg from the truth)
+    assert apart["angle_error_deg"] < 0.2 and apart["focal_error_pct"] < 0.3, apart
+    assert apart["position_error_mm"] < 10.0, apart
     ext = fit_bodies(body_model, observations, start, shipped_prior()[0], config.replace(cameras="ext"))
     np.testing.assert_allclose(ext.cameras.K, start.K)  # focal known: held
 
