@@ -107,8 +107,8 @@ def bundle_adjust(observations: BodyObservations, rig: CameraRig, config: BodyFi
             for variable, saved in zip(variables, snapshot, strict=True):
                 variable.copy_(saved)
     with torch.no_grad():
-        r2, w = cost.residuals(cams.parameters(), free)
-        error = float(r2[w > 0].sqrt().mean())
+        residual, w = cost.residuals(cams.parameters(), free)
+        error = float(residual.norm(dim=-1)[w > 0].mean())
         refined = torch.full_like(points, float("nan"))
         refined[valid] = free
     out = np.full(observations.joints_world_m.shape, np.nan)
@@ -132,10 +132,9 @@ class _RobustReprojection:
         return self.cams.tensors_at(**self.cams.unpack(theta)).project(free)[0]
 
     def residuals(self, theta: torch.Tensor, free: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Squared pixel residuals (V, N) and their weights (confidence, zero behind a camera)."""
+        """Pixel residuals (V, N, 2) and their weights (V, N) (confidence, zero behind a camera)."""
         pixels, _, in_front = self.cams.tensors_at(**self.cams.unpack(theta)).project(free)
-        r2 = ((pixels - self.observed) ** 2).sum(-1)
-        return r2, self.weights * in_front.to(r2.dtype)
+        return pixels - self.observed, self.weights * in_front.to(pixels.dtype)
 
     def tie(self, theta: torch.Tensor) -> torch.Tensor:
         values = self.cams.unpack(theta)
@@ -143,7 +142,8 @@ class _RobustReprojection:
                                   + (((values["centre_m"] - self.centre0) / self.tie_scale_m) ** 2).mean())
 
     def __call__(self, theta: torch.Tensor, free: torch.Tensor) -> torch.Tensor:
-        r2, w = self.residuals(theta, free)
+        residual, w = self.residuals(theta, free)
+        r2 = (residual**2).sum(-1)
         data = (self.s2 * r2 / (r2 + self.s2) / self.n2 * w).sum() / w.sum()
         return data + self.tie(theta)
 
@@ -183,7 +183,11 @@ def _levenberg_marquardt(cost: _RobustReprojection, free: torch.Tensor, iteratio
         for _ in range(iterations):
             H_cc, H_cp, H_pp, g_c, g_p = _normal_equations(cost, theta, X)
             for _attempt in range(10):
-                step_c, step_p = _damped_step(H_cc, H_cp, H_pp, g_c, g_p, damping)
+                try:
+                    step_c, step_p = _damped_step(H_cc, H_cp, H_pp, g_c, g_p, damping)
+                except torch.linalg.LinAlgError:  # a singular system: damp harder, as for a step that failed
+                    damping *= 10.0
+                    continue
                 new_theta, new_X = theta + step_c, X + step_p
                 new_value = cost(new_theta, new_X)
                 if torch.isfinite(new_value) and new_value < value:
@@ -207,8 +211,8 @@ def _normal_equations(cost: _RobustReprojection, theta: torch.Tensor, X: torch.T
         H_cc (V, p, V, p), H_cp (V, N, p, 3), H_pp (N, 3, 3), g_c (V, p), g_p (N, 3).
     """
     V, p = theta.shape
-    r2, w = cost.residuals(theta, X)
-    residual = cost.pixels(theta, X) - cost.observed  # (V, N, 2)
+    residual, w = cost.residuals(theta, X)  # (V, N, 2), (V, N)
+    r2 = (residual**2).sum(-1)
     # d/d(r2) of s2 r2 / (r2 + s2) = (s2 / (r2 + s2))^2; the factor 2 of d(r2)/dr and the mean's normaliser
     a = 2.0 * w * (cost.s2 / (r2 + cost.s2)) ** 2 / cost.n2 / w.sum()  # (V, N)
 
