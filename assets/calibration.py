@@ -151,7 +151,7 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
 
 @sequence_asset(
     "cameras",
-    code_version="7",
+    code_version="8",
     check_specs=[
         dg.AssetCheckSpec("cameras_valid", asset="extrinsics", blocking=True,
                           description="finite positive focal, principal point inside, right-handed rotations"),
@@ -204,6 +204,8 @@ def extrinsics(
         up_std_deg=float(floor.up_std_deg) if floor is not None else float("nan"),
         body_size_ratio=float(result.diagnostics.body_size_ratio),
         mismatched_detections=int(result.diagnostics.mismatched_detections),
+        regroup=result.diagnostics.regroup,
+        regroup_detections=" -> ".join(map(str, result.diagnostics.regroup_detections)),
     )
     rig = check_rig_geometry(table, people, floor_known=floor is not None)
     for name, report in (("cameras_valid", check_cameras_valid(table)), ("focal_plausible", check_focal_plausible(table)),

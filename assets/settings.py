@@ -125,6 +125,8 @@ class ExtrinsicsSettings(dg.Config):
     mismatch_threshold_sigma: float = library_field(_E, "mismatch_threshold_sigma")
     mismatch_max_fraction: float = library_field(_E, "mismatch_max_fraction")
     mismatch_rounds: int = library_field(_E, "mismatch_rounds")
+    regroup_max_frames: int = library_field(_E, "regroup_max_frames")
+    regroup_min_gain: float = library_field(_E, "regroup_min_gain")
 
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""

@@ -38,6 +38,7 @@ from humancal.calibration.floor import NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
+from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
 from humancal.calibration.translations import root_positions, solve_focals_translations
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted, hip_midpoints
@@ -197,14 +198,38 @@ def _body_size_ratio(points_world_m, lifted, groups) -> float:
     return float(np.median(ratio)) if len(ratio) else float("nan")
 
 
-def _pick_groups(groups, detections, max_groups, rng):
+def _pick_groups(groups, detections, max_groups, rng) -> np.ndarray:
+    """Indices of at most ``max_groups`` of the groups, spread over the frames (larger groups first)."""
     if len(groups) <= max_groups:
-        return groups
+        return np.arange(len(groups))
     frames = np.array([detections.frame[g[0]] for g in groups])
     sizes = np.array([len(g) for g in groups])
     order = np.lexsort((rng.random(len(groups)), -sizes, frames))  # by frame, larger groups first
-    pick = order[np.linspace(0, len(order) - 1, max_groups).round().astype(int)]
-    return [groups[i] for i in np.sort(pick)]
+    return np.sort(order[np.linspace(0, len(order) - 1, max_groups).round().astype(int)])
+
+
+def _regroup(ba, groups, detections, lifted_as_given, pp, intrinsics, config, rng):
+    """The groups found again with the bundle-adjusted cameras (:mod:`.regroup`) when they hold enough more
+    detections than the first ones (``regroup_min_gain``). Returns (groups, their starting points (G, 23, 3) or
+    None when the first are kept, status, (detections in the first groups, in the new ones))."""
+    before = sum(len(g) for g in groups)
+    cameras = [Camera(_K([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], ba.R_cam_from_world[v],
+                      ba.t_cam_from_world_m[v], e.width_px, e.height_px) for v, e in enumerate(intrinsics)]
+    try:
+        found = regroup_with_cameras(detections, lifted_as_given, cameras, config.regroup_max_frames)
+    except ValueError as error:  # the association refused the cameras or the detections
+        logger.warning("regrouping with the bundle-adjusted cameras failed (%s): the first groups are kept", error)
+        return groups, None, "kept: association failed", (before, 0)
+    pick = _pick_groups(found.groups, detections, config.max_groups, rng)
+    new_groups = [found.groups[i] for i in pick]
+    after = sum(len(g) for g in new_groups)
+    if after < config.regroup_min_gain * before or after <= before or len(new_groups) < 3:
+        logger.info("regrouping with the bundle-adjusted cameras: %d detections in %d groups, against %d in the "
+                    "first %d: the first groups are kept", after, len(new_groups), before, len(groups))
+        return groups, None, "kept: too few more detections", (before, after)
+    logger.info("regrouping with the bundle-adjusted cameras: %d groups (%d detections, %d frames matched), "
+                "were %d (%d detections)", len(new_groups), after, found.frames_used, len(groups), before)
+    return new_groups, found.points_world_m[pick], "regrouped", (before, after)
 
 
 def _initial_points(groups, lifted, roots_T, view, R, t):
@@ -336,7 +361,7 @@ def estimate_extrinsics(
                                    pair_cost=sol.residual_m[sol.inlier])
     if len(groups) < 3:
         raise CalibrationError(f"only {len(groups)} people could be matched across views: cannot refine the cameras")
-    groups = _pick_groups(groups, detections, config.max_groups, rng)
+    groups = [groups[i] for i in _pick_groups(groups, detections, config.max_groups, rng)]
     t_init = sol.t_cam_from_world_m.copy()
     resected = np.zeros(V, bool)
     if blind.any():
@@ -377,6 +402,20 @@ def estimate_extrinsics(
             logger.info("views %s: started the bundle adjustment from %s px (%s)", np.flatnonzero(unseen).tolist(),
                         np.round(f[unseen]).tolist(), started)
         ba = adjust(f, R, t_init, points, config.bundle_iterations)
+        regroup_status, regroup_counts = "off", (0, 0)
+        if config.regroup_max_frames and V == 2:
+            # two views: matching by geometry adds an epipolar line, which a wrong pair near it passes; the
+            # camera-free matching's pose test is kept (measured: the groups found again were worse in 5 of 6
+            # two-view draws of a test scene)
+            regroup_status = "off: two views"
+        elif config.regroup_max_frames:
+            clock_regroup = time.perf_counter()
+            groups, points, regroup_status, regroup_counts = _regroup(ba, groups, detections, lifted_as_given, pp,
+                                                                      intrinsics, config, rng)
+            timings["regroup"] = time.perf_counter() - clock_regroup
+            if points is not None:
+                ba = adjust(ba.fx_px, ba.R_cam_from_world, ba.t_cam_from_world_m, points, config.bundle_iterations,
+                            lifted)
         dropped = 0
         for _ in range(config.mismatch_rounds if config.mismatch_threshold_sigma > 0 else 0):
             kept_groups, kept, n = drop_mismatched_detections(groups, ba.detection_error_sigma,
@@ -402,7 +441,7 @@ def estimate_extrinsics(
                         config.bundle_iterations, lifted)
     _require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
                     "bundle adjustment")
-    timings["bundle"] = time.perf_counter() - clock
+    timings["bundle"] = time.perf_counter() - clock - timings.get("regroup", 0.0)  # the adjustments alone
 
     clock = time.perf_counter()
     R_final, t_final, floor, floor_problem, people = _world_frame(ba, V, config)
@@ -449,7 +488,8 @@ def estimate_extrinsics(
                                         world_frame="floor" if floor is not None else "camera_0",
                                         floor_problem=floor_problem, people_world_m=people,
                                         body_size_ratio=_body_size_ratio(ba.points_world_m, lifted, groups),
-                                        mismatched_detections=dropped)
+                                        mismatched_detections=dropped, regroup=regroup_status,
+                                        regroup_detections=regroup_counts)
     logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})

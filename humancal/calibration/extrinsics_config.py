@@ -61,6 +61,12 @@ class ExtrinsicsConfig:
         mismatch_max_fraction: when more of the detections than this fraction are above the threshold, none is
             taken out (the rig is off, not a few matches).
         mismatch_rounds: at most this many rounds of taking out and adjusting again.
+        regroup_max_frames: after the first bundle adjustment, the detections of up to this many frames (spread
+            evenly) are matched again with its cameras (:mod:`~humancal.calibration.regroup`: the association of
+            the method, which finds the people the first, camera-free matching left out) and the bundle adjustment
+            runs on those groups when they hold at least ``regroup_min_gain`` times the detections of the first
+            ones (and more); 0 turns this off. Not with two views (see ``ExtrinsicsDiagnostics.regroup``).
+        regroup_min_gain: see ``regroup_max_frames``.
     """
 
     rotation_threshold_deg: float = 10.0
@@ -87,6 +93,8 @@ class ExtrinsicsConfig:
     mismatch_threshold_sigma: float = 10.0
     mismatch_max_fraction: float = 0.2
     mismatch_rounds: int = 2
+    regroup_max_frames: int = 150
+    regroup_min_gain: float = 1.0
 
     def __post_init__(self) -> None:
         if not 0.0 < self.rotation_threshold_deg < 90.0:
@@ -103,6 +111,12 @@ class ExtrinsicsConfig:
             raise ValueError(f"ExtrinsicsConfig: mismatch_threshold_sigma={self.mismatch_threshold_sigma} must be >= 0 "
                              f"(0: off), mismatch_max_fraction={self.mismatch_max_fraction} in (0, 1], "
                              f"mismatch_rounds={self.mismatch_rounds} >= 0")
+        if isinstance(self.regroup_max_frames, bool) or not isinstance(self.regroup_max_frames, (int, np.integer)) \
+                or self.regroup_max_frames < 0:
+            raise ValueError(f"ExtrinsicsConfig.regroup_max_frames={self.regroup_max_frames!r} must be an integer >= 0 "
+                             "(0: off)")
+        if not (np.isfinite(self.regroup_min_gain) and self.regroup_min_gain >= 1.0):
+            raise ValueError(f"ExtrinsicsConfig.regroup_min_gain={self.regroup_min_gain} must be a number >= 1")
 
     def replace(self, **changes) -> ExtrinsicsConfig:
         """A validated copy with some fields changed."""
@@ -138,6 +152,12 @@ class ExtrinsicsDiagnostics:
         bundle_inlier_fraction: keypoints within the Huber threshold in the bundle adjustment.
         mismatched_detections: detections taken out of their groups after a bundle adjustment (reprojected over
             ``mismatch_threshold_sigma`` stds away: matched to the wrong person); ``groups`` is without them.
+        regroup: ``"regrouped"`` (the groups were found again with the first bundle adjustment's cameras, and
+            ``groups`` are those), ``"kept: too few more detections"``, ``"kept: association failed"`` (logged), or
+            ``"off"`` (``regroup_max_frames`` 0) or ``"off: two views"`` (with two views the camera-free
+            matching's groups are kept: geometry adds one epipolar line, which a wrong pair near it passes).
+        regroup_detections: detections in the first groups and in the groups found again (both after choosing at
+            most ``max_groups``; (0, 0) when off).
         timings_s: seconds per step.
     """
 
@@ -152,6 +172,8 @@ class ExtrinsicsDiagnostics:
     people_world_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     body_size_ratio: float = float("nan")
     mismatched_detections: int = 0
+    regroup: str = "off"
+    regroup_detections: tuple[int, int] = (0, 0)
 
 
 @dataclass(frozen=True)

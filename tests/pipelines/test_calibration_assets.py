@@ -78,7 +78,10 @@ def test_checks_pass_on_a_good_rig(materialized):
     size = checks[("extrinsics", "people_plausible")]
     assert size.passed and 0.8 < size.metadata["body_size_ratio"].value < 1.25, size.description
     floor = checks[("extrinsics", "floor_found")]
-    assert floor.passed and "up from floor_plane" in floor.description, floor.description
+    # the standing people's sole plane, or their plumb lines when the plane is not trusted (with the groups found
+    # again after the first bundle adjustment this scene takes the plumb lines, up within 0.2 deg)
+    assert floor.passed and ("up from floor_plane" in floor.description or "up from plumb_lines" in floor.description), \
+        floor.description
 
 
 def test_a_check_with_nothing_to_check_warns_instead_of_passing(materialized):

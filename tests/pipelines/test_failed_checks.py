@@ -49,7 +49,8 @@ def _calibration(partition: str):
                             standing_groups=3, floor_rms_m=0.01)
     diagnostics = SimpleNamespace(floor=floor, per_view=per_view, bundle_inlier_fraction=1.0, world_frame="floor",
                                   floor_problem=None, people_world_m=PEOPLE + [0.0, 0.0, 1.0],
-                                  body_size_ratio=1.0, mismatched_detections=0)
+                                  body_size_ratio=1.0, mismatched_detections=0, regroup="regrouped",
+                                  regroup_detections=(40, 60))
     return SimpleNamespace(cameras=cameras, diagnostics=diagnostics)
 
 

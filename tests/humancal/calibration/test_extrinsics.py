@@ -57,7 +57,7 @@ def test_diagnostics(ring_result):
     assert (pv["focal_single_view_px"].to_numpy() == [e.fx_px for e in intr]).all()
     groups = result.diagnostics.groups
     assert groups.groupby("group")["view"].apply(lambda v: v.is_unique).all()
-    assert set(result.diagnostics.timings_s) == {"rotations", "linear", "bundle", "floor"}
+    assert set(result.diagnostics.timings_s) == {"rotations", "linear", "bundle", "regroup", "floor"}
 
 
 def test_one_view_is_an_error(ring_scene, ring_stand_in):
@@ -83,6 +83,7 @@ def test_two_views(ring_scene, simulate_views):
     cams = [ring_scene.rig[0], ring_scene.rig[2]]
     dets, lifted, _ = simulate_views(ring_scene, cams, seed=5)
     _, result = _calibrate(dets, lifted, cams)
+    assert result.diagnostics.regroup == "off: two views"  # the camera-free groups are kept
     err = camera_errors(result.cameras, cams)
     # two cameras facing each other: depth in one view is depth in the other, so the focal lengths rest on the
     # people's metric size, which is free per person (ExtrinsicsConfig.person_scale_std): a few per cent, and
