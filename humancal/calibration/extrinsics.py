@@ -217,8 +217,9 @@ def _regroup(ba, groups, detections, lifted_as_given, pp, intrinsics, config, rn
                       ba.t_cam_from_world_m[v], e.width_px, e.height_px) for v, e in enumerate(intrinsics)]
     try:
         found = regroup_with_cameras(detections, lifted_as_given, cameras, config.regroup_max_frames)
-    except ValueError as error:  # the association refused the cameras or the detections
-        logger.warning("regrouping with the bundle-adjusted cameras failed (%s): the first groups are kept", error)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError) as error:  # refused inputs, numerical failure
+        logger.warning("regrouping with the bundle-adjusted cameras failed (%s: %s): the first groups are kept",
+                       type(error).__name__, error)
         return groups, None, "kept: association failed", (before, 0)
     pick = _pick_groups(found.groups, detections, config.max_groups, rng)
     new_groups = [found.groups[i] for i in pick]

@@ -87,6 +87,8 @@ def regroup_with_cameras(detections: DenseDetections, lifted: LiftedPoses, camer
     result = associate(subset, lifted.subset(rows), CameraRig.from_cameras(list(cameras)), config)
     skeleton = {(int(f), int(p)): i for i, (f, p) in enumerate(zip(result.skeleton_frame, result.skeleton_person))}
     kept = np.flatnonzero(result.person_id >= 0)
+    if len(kept) == 0:
+        return Regrouping([], np.zeros((0, NUM_JOINTS, 3)), len(frames))
     kept = kept[np.lexsort((result.view[kept], result.person_id[kept], result.frame[kept]))]
     keys = np.c_[result.frame[kept], result.person_id[kept]]
     cuts = np.flatnonzero((np.diff(keys, axis=0) != 0).any(1)) + 1

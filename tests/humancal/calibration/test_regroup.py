@@ -81,3 +81,21 @@ def test_bad_regroup_settings_are_refused(field, value):
 
     with pytest.raises(ValueError, match=field):
         ExtrinsicsConfig(**{field: value})
+
+
+def test_nobody_seen_twice_gives_no_group(ring_scene, ring_stand_in):
+    """One frame, each person in one view only: nothing to match, an empty result rather than an error."""
+    from humancal.detections import DenseDetections
+
+    d, lifted, pid = ring_stand_in.detections, ring_stand_in.lifted, ring_stand_in.person_id
+    frame = d.frame == d.frame.min()
+    rows, seen = [], set()
+    for row in np.flatnonzero(frame & (pid >= 0)):
+        if pid[row] not in seen and d.view[row] not in {d.view[r] for r in rows}:
+            rows.append(row)
+            seen.add(pid[row])
+    rows = np.array(rows)
+    assert len(rows) >= 2 and len(np.unique(d.view[rows])) == len(rows)
+    sub = DenseDetections(d.frame[rows], d.view[rows], d.det_id[rows], d.keypoints_px[rows], d.scores[rows])
+    found = regroup_with_cameras(sub, lifted.subset(rows), list(ring_scene.rig))
+    assert found.groups == [] and found.points_world_m.shape == (0, 23, 3) and found.detections == 0
