@@ -36,7 +36,7 @@ from humancal.calibration.blind_views import blind_views, other_views_focal, res
 from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
 from humancal.calibration.floor import NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
-from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs
+from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs, spread_groups
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
@@ -198,16 +198,6 @@ def _body_size_ratio(points_world_m, lifted, groups) -> float:
     return float(np.median(ratio)) if len(ratio) else float("nan")
 
 
-def _pick_groups(groups, detections, max_groups, rng) -> np.ndarray:
-    """Indices of at most ``max_groups`` of the groups, spread over the frames (larger groups first)."""
-    if len(groups) <= max_groups:
-        return np.arange(len(groups))
-    frames = np.array([detections.frame[g[0]] for g in groups])
-    sizes = np.array([len(g) for g in groups])
-    order = np.lexsort((rng.random(len(groups)), -sizes, frames))  # by frame, larger groups first
-    return np.sort(order[np.linspace(0, len(order) - 1, max_groups).round().astype(int)])
-
-
 def _regroup(ba, groups, detections, lifted_as_given, pp, intrinsics, config, rng):
     """The groups found again with the bundle-adjusted cameras (:mod:`.regroup`) when they hold enough more
     detections than the first ones (``regroup_min_gain``). Returns (groups, their starting points (G, 23, 3) or
@@ -221,7 +211,7 @@ def _regroup(ba, groups, detections, lifted_as_given, pp, intrinsics, config, rn
         logger.warning("regrouping with the bundle-adjusted cameras failed (%s: %s): the first groups are kept",
                        type(error).__name__, error)
         return groups, None, "kept: association failed", (before, 0)
-    pick = _pick_groups(found.groups, detections, config.max_groups, rng)
+    pick = spread_groups(found.groups, detections, config.max_groups, rng)
     new_groups = [found.groups[i] for i in pick]
     after = sum(len(g) for g in new_groups)
     if after < config.regroup_min_gain * before or after <= before or len(new_groups) < 3:
@@ -362,7 +352,7 @@ def estimate_extrinsics(
                                    pair_cost=sol.residual_m[sol.inlier])
     if len(groups) < 3:
         raise CalibrationError(f"only {len(groups)} people could be matched across views: cannot refine the cameras")
-    groups = [groups[i] for i in _pick_groups(groups, detections, config.max_groups, rng)]
+    groups = [groups[i] for i in spread_groups(groups, detections, config.max_groups, rng)]
     t_init = sol.t_cam_from_world_m.copy()
     resected = np.zeros(V, bool)
     if blind.any():

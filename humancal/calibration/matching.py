@@ -16,9 +16,14 @@ away from its group's keypoints; :func:`drop_mismatched_detections` takes it out
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-__all__ = ["drop_mismatched_detections", "groups_from_pairs"]
+if TYPE_CHECKING:
+    from humancal.detections import DenseDetections
+
+__all__ = ["drop_mismatched_detections", "groups_from_pairs", "spread_groups"]
 
 
 def _find(parent: np.ndarray, i: int) -> int:
@@ -134,3 +139,15 @@ def drop_mismatched_detections(groups: list[np.ndarray], error_sigma: np.ndarray
             kept.append(rest)
             index.append(k)
     return kept, np.asarray(index, dtype=int), int(bad.sum())
+
+
+def spread_groups(groups: list[np.ndarray], detections: DenseDetections, max_groups: int,
+                  rng: np.random.Generator) -> np.ndarray:
+    """Indices (sorted) of at most ``max_groups`` of the groups (arrays of rows of ``detections``), spread evenly
+    over the frames, the groups with more views first within a frame (ties broken by ``rng``)."""
+    if len(groups) <= max_groups:
+        return np.arange(len(groups))
+    frames = np.array([detections.frame[g[0]] for g in groups])
+    sizes = np.array([len(g) for g in groups])
+    order = np.lexsort((rng.random(len(groups)), -sizes, frames))  # by frame, larger groups first
+    return np.sort(order[np.linspace(0, len(order) - 1, max_groups).round().astype(int)])
