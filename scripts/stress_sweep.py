@@ -129,16 +129,16 @@ def _angles_aligned_with_axes(estimated, truth) -> np.ndarray:
     each optical axis. For three views: their triangle of centres alone leaves the alignment's rotation to the
     triangle's shape error (scene 94 of the sweep: 5.2 deg for each of three views whose relative rotations are
     within 0.8 deg of the truth); with two views the centres-only alignment already adds these points."""
+    from humancal.calibration.alignment import rig_alignment_points
     from humancal.geometry.alignment import fit_similarity
     from humancal.geometry.rotations import rotation_distance_deg
 
-    def points(cameras):
+    def radius(cameras):
         centres = np.stack([c.center_world_m for c in cameras])
-        radius = float(np.linalg.norm(centres - centres.mean(0), axis=1).mean()) or 1.0
-        ahead = np.stack([c.center_world_m + radius * c.R_cam_from_world[2] for c in cameras])
-        return np.concatenate([centres, ahead])
+        return float(np.linalg.norm(centres - centres.mean(0), axis=1).mean()) or 1.0
 
-    similarity = fit_similarity(points(estimated), points(truth))
+    similarity = fit_similarity(rig_alignment_points(estimated, radius(estimated), with_axes=True),
+                                rig_alignment_points(truth, radius(truth), with_axes=True))
     aligned = np.stack([similarity.apply_to_camera(c).R_cam_from_world for c in estimated])
     return rotation_distance_deg(aligned, np.stack([c.R_cam_from_world for c in truth]))
 

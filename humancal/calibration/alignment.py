@@ -15,14 +15,15 @@ from humancal.geometry.alignment import Similarity, fit_similarity
 __all__ = ["Similarity", "rig_alignment_points", "align_rig"]
 
 
-def rig_alignment_points(cameras: list[Camera], length: float) -> np.ndarray:
-    """Camera centres, plus (for fewer than three cameras) a point ``length`` ahead on each optical axis.
+def rig_alignment_points(cameras: list[Camera], length: float, with_axes: bool = False) -> np.ndarray:
+    """Camera centres, plus (for fewer than three cameras, or ``with_axes``) a point ``length`` ahead on each
+    optical axis.
 
     With two cameras the centres alone leave the rotation about their baseline free; the points on the optical
-    axes fix it.
+    axes fix it. With three, the centres fix it only as well as their triangle's shape is right.
     """
     centres = np.stack([c.center_world_m for c in cameras])
-    if len(cameras) >= 3:
+    if len(cameras) >= 3 and not with_axes:
         return centres
     ahead = np.stack([c.center_world_m + length * c.R_cam_from_world[2] for c in cameras])
     return np.concatenate([centres, ahead])

@@ -203,8 +203,7 @@ def _regroup(ba, groups, detections, lifted_as_given, pp, intrinsics, config, rn
     detections than the first ones (``regroup_min_gain``). Returns (groups, their starting points (G, 23, 3) or
     None when the first are kept, status, (detections in the first groups, in the new ones))."""
     before = sum(len(g) for g in groups)
-    cameras = [Camera(_K([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], ba.R_cam_from_world[v],
-                      ba.t_cam_from_world_m[v], e.width_px, e.height_px) for v, e in enumerate(intrinsics)]
+    cameras = _cameras(ba, ba.R_cam_from_world, ba.t_cam_from_world_m, pp, intrinsics)
     try:
         found = regroup_with_cameras(detections, lifted_as_given, cameras, config.regroup_max_frames)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as error:  # refused inputs, numerical failure
@@ -438,10 +437,7 @@ def estimate_extrinsics(
     R_final, t_final, floor, floor_problem, people = _world_frame(ba, V, config)
     timings["floor"] = time.perf_counter() - clock
 
-    cameras = [
-        Camera(_K([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], R_final[v], t_final[v], e.width_px, e.height_px)
-        for v, e in enumerate(intrinsics)
-    ]
+    cameras = _cameras(ba, R_final, t_final, pp, intrinsics)
     edges = np.zeros(V, int)
     for p in pairs:
         if p.support >= config.min_pair_support:
@@ -485,6 +481,12 @@ def estimate_extrinsics(
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})
     return ExtrinsicsEstimate(cameras, diagnostics)
+
+
+def _cameras(ba, R_cam_from_world, t_cam_from_world_m, pp, intrinsics) -> list[Camera]:
+    """The bundle adjustment's focal lengths with the given extrinsics, as cameras of the views' image sizes."""
+    return [Camera(_K([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], R_cam_from_world[v], t_cam_from_world_m[v],
+                   e.width_px, e.height_px) for v, e in enumerate(intrinsics)]
 
 
 def _K(fx, fy, pp) -> np.ndarray:
