@@ -62,6 +62,9 @@ _REPEAT_DISTANCE_M = 0.1
 """Two groups whose keypoints are this close on average (metres) repeat one another (one still person seen in two
 frames): their lifter and detector errors are the same, so they count as one in the focal uncertainty."""
 
+_STILL_ITERATIONS = 3
+"""Iterations in a row with the cameras still (``camera_tolerance``) after which the bundle adjustment stops."""
+
 logger = logging.getLogger(__name__)
 
 
@@ -151,6 +154,7 @@ def bundle_adjust(
     huber: float = 2.5,
     max_iterations: int = 40,
     tolerance: float = 1e-6,
+    camera_tolerance: float = 2e-5,
 ) -> BundleResult:
     """Refine focal lengths, rotations, translations and the groups' keypoints (see the module docstring).
 
@@ -176,6 +180,11 @@ def bundle_adjust(
         huber: Huber threshold in standard deviations.
         max_iterations: LM iterations.
         tolerance: stop when the relative cost decrease is below this.
+        camera_tolerance: also stop when the cameras have stopped moving: for ``_STILL_ITERATIONS`` iterations
+            in a row no log focal, rotation increment (radians) or translation relative to the cameras' median
+            distance from the world origin changed by more than this (the points and sizes can crawl on for
+            tens of iterations at a relative cost decrease of 1e-5 while the cameras move by less than 1e-5;
+            in a flat valley, where the cameras still move, this never fires first). 0 turns it off.
 
     Returns:
         :class:`BundleResult` (the last state that lowered the cost).
@@ -250,7 +259,8 @@ def bundle_adjust(
     free = np.ones((V, nc), bool)
     free[0, nf:] = False
 
-    lam, converged, it, rejected = 1e-3, False, 0, 0
+    lam, converged, it, rejected, still = 1e-3, False, 0, 0, 0
+    scale_m = max(float(np.median(np.linalg.norm(t_init, axis=1))), 1e-3)
     Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
     if not np.isfinite(cost):
         raise CalibrationError("bundle adjustment: the starting cost is not finite (non-finite keypoints or poses)")
@@ -268,6 +278,8 @@ def bundle_adjust(
         if not improved:
             converged = True
             break
+        moved = _camera_step(prob, cams, new_cams, nf, scale_m)
+        still = still + 1 if moved < camera_tolerance else 0
         # fold the rotation increment into R0 so the increment parameters stay near zero
         R0 = rotvec_to_rotmat(new_cams[:, nf : nf + 3]) @ R0
         new_cams[:, nf : nf + 3] = 0.0
@@ -275,7 +287,7 @@ def bundle_adjust(
         lam = max(lam / 5.0, 1e-7)
         old = cost
         Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
-        if (old - cost) / max(old, 1e-12) < tolerance:
+        if (old - cost) / max(old, 1e-12) < tolerance or still >= _STILL_ITERATIONS:
             converged = True
             break
     f_std = _focal_std(prob, cams, R0, X, log_q, free, w_obs)
@@ -294,6 +306,15 @@ def bundle_adjust(
                        status[status != "ok"].tolist())
     return BundleResult(fx, fy, R, t, X, f_std, rms, float(inl.mean()) if len(inl) else 0.0, it, converged,
                         np.exp(log_q), status, rejected, float(cost), detection_error)
+
+
+def _camera_step(prob: _Problem, cams: np.ndarray, new_cams: np.ndarray, nf: int, scale_m: float) -> float:
+    """Largest change of a camera parameter in one step: log focal, rotation increment (radians), translation
+    relative to ``scale_m``."""
+    log_f_change = np.abs(_log_focal(prob, new_cams[:, :nf])[0] - _log_focal(prob, cams[:, :nf])[0]).max()
+    rotation_change = np.abs(new_cams[:, nf : nf + 3]).max()
+    translation_change = np.abs(new_cams[:, nf + 3 :] - cams[:, nf + 3 :]).max() / scale_m
+    return float(max(log_f_change, rotation_change, translation_change))
 
 
 def _median_per_detection(values: np.ndarray, detection: np.ndarray, count: int) -> np.ndarray:

@@ -143,3 +143,17 @@ def test_groups_repeat_one_another_only_when_their_keypoints_coincide():
     missing[0, :10] = np.nan  # joints absent in one group are not compared
     counts = _repeats(np.concatenate([still, walking, missing, np.full((1, 23, 3), np.nan)]))
     np.testing.assert_array_equal(counts, [6, 6, 6, 6, 6, 1, 1, 1, 6, 1])
+
+
+def test_stops_once_the_cameras_stop_moving(ring_problem):
+    """With a cost tolerance too tight to stop it (as the crawl of points and sizes is in larger scenes), the
+    camera-step rule stops the adjustment once the cameras have settled, at the cameras the full run reaches."""
+    p = ring_problem
+    f0 = p["f"] * np.array([1.0, 1.1, 0.9, 1.05])
+    args = (p["d"], p["lifted"], p["groups"], p["points"], f0, f0, p["pp"], p["R"], p["t"])
+    full = bundle_adjust(*args, tolerance=1e-15, camera_tolerance=0.0, max_iterations=60)
+    early = bundle_adjust(*args, tolerance=1e-15, max_iterations=60)
+    assert early.converged and early.iterations < full.iterations, (early.iterations, full.iterations)
+    assert np.allclose(early.fx_px, full.fx_px, rtol=1e-3)
+    assert np.abs(early.t_cam_from_world_m - full.t_cam_from_world_m).max() < 2e-3
+    assert np.abs(early.R_cam_from_world - full.R_cam_from_world).max() < 1e-3
