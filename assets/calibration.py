@@ -151,7 +151,7 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
 
 @sequence_asset(
     "cameras",
-    code_version="8",
+    code_version="9",
     check_specs=[
         dg.AssetCheckSpec("cameras_valid", asset="extrinsics", blocking=True,
                           description="finite positive focal, principal point inside, right-handed rotations"),
