@@ -184,7 +184,7 @@ def bundle_adjust(
             in a row no log focal, rotation increment (radians) or translation relative to the cameras' median
             distance from the world origin changed by more than this (the points and sizes can crawl on for
             tens of iterations at a relative cost decrease of 1e-5 while the cameras move by less than 1e-5;
-            in a flat valley, where the cameras still move, this never fires first). 0 turns it off.
+            along a flat valley the cameras still move, and it does not fire). 0 turns it off.
 
     Returns:
         :class:`BundleResult` (the last state that lowered the cost).
