@@ -279,6 +279,12 @@ def summarise(scenes: pd.DataFrame, views: pd.DataFrame) -> dict:
         for factor in ("behaviour", "lifter_seed", "cameras", "portrait", "distortion", "rig"):
             out[f"by_{factor}"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
                                    for key, group in merged.groupby(factor)}
+        # the acceptance's "people stand or walk" figures per lifter, and what the views left "ok" measure
+        out["by_behaviour_lifter"] = {f"{behaviour} / {seed}": {m: _quantiles(group[m]) for m in metrics}
+                                      for (behaviour, seed), group in merged.groupby(["behaviour", "lifter_seed"])}
+        unflagged = merged[merged["focal_status"] == "ok"]
+        out["by_behaviour_unflagged"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+                                         for key, group in unflagged.groupby("behaviour")}
         bins = pd.cut(merged["views"], [1, 2, 8, 20, 31], labels=["2", "3-8", "9-20", "21-31"])
         out["by_views"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
                            for key, group in merged.groupby(bins, observed=True)}
@@ -298,7 +304,8 @@ def _markdown(summary: dict) -> str:
              f"Outcomes: {summary['outcomes']}; unlabelled failures: {summary.get('unlabelled_failures', 0)} views", ""]
     if summary.get("labels"):
         lines += [f"Labels: {summary['labels']}", ""]
-    for factor in ("behaviour", "lifter_seed", "views", "frames", "cameras", "portrait", "distortion", "rig"):
+    for factor in ("behaviour", "lifter_seed", "behaviour_lifter", "behaviour_unflagged", "views", "frames", "cameras",
+                   "portrait", "distortion", "rig"):
         table = summary.get(f"by_{factor}")
         if not table:
             continue
