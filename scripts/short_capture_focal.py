@@ -152,15 +152,11 @@ def main() -> None:
     args = parser.parse_args()
     variants = [parse_variant(v) for v in (args.variant or [""])]
 
-    import torch
-
     from humancal.body import BodyModel
     from humancal.lifter import load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
 
-    checkpoint = shipped_checkpoint() if args.lifter == "shipped" else torch.load(args.lifter, map_location="cpu",
-                                                                                    weights_only=True)
-    body, lifter = BodyModel(), load_lifter(checkpoint)
+    body, lifter = BodyModel(), load_lifter(shipped_checkpoint() if args.lifter == "shipped" else args.lifter)
     seeds = [int(s) for s in args.seeds.split(",") if s]
     scenes = [(f"tiny seed {s}", generate_scene(preset("tiny", seed=s), body)) for s in seeds]
     if not args.no_demo:
