@@ -29,9 +29,9 @@ from humancal.datasets.shelf import load_shelf
 from humancal.settings import dataset_dir
 
 CONVENTIONS = {
-    "centred principal point, one focal (humancal)": dict(centred_principal_point=True, square_pixels=True),
-    "centred principal point, fx and fy (the paper)": dict(centred_principal_point=True, square_pixels=False),
-    "true principal point, one focal": dict(centred_principal_point=False, square_pixels=True),
+    "centred principal point, one focal (humancal)": {"centred_principal_point": True, "square_pixels": True},
+    "centred principal point, fx and fy (the paper)": {"centred_principal_point": True, "square_pixels": False},
+    "true principal point, one focal": {"centred_principal_point": False, "square_pixels": True},
 }
 METRICS = ("focal_error_pct", "position_error_mm", "angle_error_deg", "residual_px")
 
