@@ -45,6 +45,7 @@ def self_calibration_floor(
     centred_principal_point: bool = True,
     square_pixels: bool = True,
     free_focal: bool = True,
+    free_k1: bool = False,
     max_points: int = 2000,
     seed: int = 0,
 ) -> CameraErrors:
@@ -64,6 +65,7 @@ def self_calibration_floor(
         square_pixels: one focal length per view, ``sqrt(fx fy)`` of the truth at the start (False: fx and fy
             fitted separately, as the paper's intrinsics ``[fx, fy, w/2, h/2]``).
         free_focal: fit the focal lengths (False: held at the truth's, under the convention).
+        free_k1: also fit each view's first radial distortion coefficient (humancal's lens option).
         max_points: at most this many points are used (a seeded random subset): the floor is a property of the
             rig and where people are, and a few thousand points fix it.
         seed: seed of that subset.
@@ -93,7 +95,7 @@ def self_calibration_floor(
     seen_px, visible = np.stack(seen), np.stack(visible)  # (V, N, 2), (V, N)
     K_model = [_convention_intrinsics(c, centred_principal_point, square_pixels) for c in ground_truth]
     n_focal = 0 if not free_focal else 1 if square_pixels else 2  # log scales: one focal, or fx and fy
-    n_cam = 6 + n_focal
+    n_cam = 6 + n_focal + int(free_k1)
 
     def cameras_of(x: np.ndarray) -> list[Camera]:
         params = x[:n_cam * V].reshape(V, n_cam)
@@ -103,8 +105,11 @@ def self_calibration_floor(
             if n_focal:
                 K[0, 0] *= np.exp(params[v, 6])
                 K[1, 1] *= np.exp(params[v, 6 + n_focal - 1])
+            distortion = cam.distortion.copy()
+            if free_k1:
+                distortion[0] += params[v, -1]
             out.append(Camera(K, cv2.Rodrigues(params[v, :3])[0], params[v, 3:6].copy(), cam.width_px,
-                              cam.height_px, cam.distortion))
+                              cam.height_px, distortion))
         return out
 
     def residuals(x: np.ndarray) -> np.ndarray:
@@ -115,7 +120,7 @@ def self_calibration_floor(
             out.append(np.where(visible[v][:, None], np.nan_to_num(px - seen_px[v], nan=1e3), 0.0).ravel())
         return np.concatenate(out)
 
-    start = [np.r_[cv2.Rodrigues(c.R_cam_from_world)[0].ravel(), c.t_cam_from_world_m, [0.0] * n_focal]
+    start = [np.r_[cv2.Rodrigues(c.R_cam_from_world)[0].ravel(), c.t_cam_from_world_m, [0.0] * (n_focal + int(free_k1))]
              for c in ground_truth]
     x0 = np.concatenate([np.concatenate(start), X.ravel()])
     sparsity = lil_matrix((2 * V * N, len(x0)), dtype=np.int8)

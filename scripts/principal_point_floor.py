@@ -8,8 +8,8 @@ fy up to 1.6 % apart. Two tables, both from exact, noise-free projections of the
    (:func:`evaluation.camera_metrics.centred_principal_point_floor`; no alignment);
 2. the whole rig self-calibrated under a convention (:func:`evaluation.calibration_floor.self_calibration_floor`:
    every pose, focal length and point free, least squares from the truth), scored by the benchmark's protocol
-   (similarity alignment of the centres): humancal's convention, the paper's, and humancal's with the true
-   principal points.
+   (similarity alignment of the centres): humancal's convention, the paper's, humancal's with a free k1, and
+   humancal's with the true principal points.
    The first row is the floor under the ``init`` and ``int_ext`` rows of the Shelf tables: a calibration from the
    real detections cannot be expected below it.
 
@@ -31,6 +31,8 @@ from humancal.settings import dataset_dir
 CONVENTIONS = {
     "centred principal point, one focal (humancal)": {"centred_principal_point": True, "square_pixels": True},
     "centred principal point, fx and fy (the paper)": {"centred_principal_point": True, "square_pixels": False},
+    "centred principal point, one focal, k1 (humancal's lens option)": {"centred_principal_point": True,
+                                                                        "square_pixels": True, "free_k1": True},
     "true principal point, one focal": {"centred_principal_point": False, "square_pixels": True},
 }
 METRICS = ("focal_error_pct", "position_error_mm", "angle_error_deg", "residual_px")

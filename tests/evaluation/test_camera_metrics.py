@@ -188,3 +188,19 @@ def test_self_calibration_floor_of_non_square_pixels_is_a_focal_error():
     np.testing.assert_allclose(free["focal_error_pct"], 0.0, atol=1e-3)
     with pytest.raises(ValueError, match="at least 2 cameras and 6 finite points"):
         self_calibration_floor(rig, points[:5])
+
+
+def test_self_calibration_floor_with_a_free_k1_fits_at_least_as_well():
+    points = np.random.default_rng(5).uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 1.8], size=(300, 3))
+
+    def shifted(K):
+        K[:2, 2] += (30.0, 20.0)
+        return K
+
+    rig = _with_intrinsics(_rig(4), shifted)
+    without = self_calibration_floor(rig, points)
+    with_k1 = self_calibration_floor(rig, points, free_k1=True)
+    # One more parameter per view: the residual left does not rise, and the k1 is used.
+    assert with_k1["residual_px"].mean() <= without["residual_px"].mean() + 1e-6
+    assert np.abs([c.distortion[0] for c in with_k1["cameras"]]).max() > 1e-4
+    assert all(c.distortion[0] == 0 for c in without["cameras"])
