@@ -44,10 +44,11 @@ def _prior_or_none(variant: str):
     partitions_def=SEQUENCES,
     group_name="benchmark",
     metadata={**table_metadata("metrics"), ON_REQUEST_KEY: "humancal benchmark"},
-    code_version="9",
+    code_version="10",
     description="The paper's regimes (ext, gt_cameras, init, separate, per_frame_prior, no_prior and the prior "
                 "ablations whose weights exist), and int_ext with the true principal points (a diagnostic), fitted "
-                "and scored on one sequence.",
+                "and scored on one sequence; convention_floor: the cameras the self-calibration's convention allows "
+                "at best (a diagnostic, no fit).",
 )
 def method_tables(context: dg.AssetExecutionContext, config: MethodTableSettings, datasets: DatasetsResource,
                   body_model: BodyModelResource, torch_runtime: TorchResource, raw_detections: pd.DataFrame,

@@ -21,7 +21,10 @@ local-linear term / with one-directional GRUs / without the skip connection (onl
 
 ``int_ext_known_pp`` is not one of the paper's rows: it measures what the principal point, which every other
 self-calibrated row holds at the image centre, costs on this sequence (ground truth in a diagnostic row only).
-``int_ext_no_bundle`` is not one of them either: ``int_ext`` without the bundle-adjusted start, the joint
+``convention_floor`` is not a fit: the cameras that the self-calibration's convention (principal points at the
+image centres, one focal length per view) allows at best, fitted to exact projections of the true 3D joints
+(:func:`evaluation.calibration_floor.self_calibration_floor`; ground truth in a diagnostic row only). Camera rows
+only; no calibration from detections is expected below it. ``int_ext_no_bundle`` is not one of them either: ``int_ext`` without the bundle-adjusted start, the joint
 refinement straight from the init cameras (the paper's schedule, and the pipeline's until the bundle start was
 chosen).
 
@@ -39,9 +42,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
 import pandas as pd
 
 from evaluation.body_metrics import camera_and_body_rows
+from evaluation.calibration_floor import self_calibration_floor
+from evaluation.camera_metrics import camera_metrics
 from evaluation.protocols import metrics_table
 from humancal.association import associate, to_associations_table, to_skeletons_table
 from humancal.body import BodyModel
@@ -58,7 +64,7 @@ __all__ = ["METHODS", "Method", "method_metric_table"]
 @dataclass(frozen=True)
 class Method:
     """One regime: where the cameras start (``init``, ``gt``, ``gt_intrinsics``, ``gt_principal_point``,
-    ``bundle``), which of their parameters the fit moves (``fixed``, ``ext``, ``int_ext``), the prior variant (None:
+    ``bundle``; ``convention_floor``: no fit, see the module docstring), which of their parameters the fit moves (``fixed``, ``ext``, ``int_ext``), the prior variant (None:
     no prior) and whether moving cameras start from a bundle adjustment (``BodyFitConfig.bundle_start``)."""
 
     cameras: str
@@ -75,6 +81,7 @@ METHODS: dict[str, Method] = {
     "init": Method("init", "fixed"),
     "separate": Method("bundle", "fixed"),
     "int_ext_no_bundle": Method("init", "int_ext", bundle_start=False),
+    "convention_floor": Method("convention_floor", "fixed", prior=None),
     "per_frame_prior": Method("init", "int_ext", "per_frame"),
     "no_prior": Method("init", "int_ext", None),
     "no_local_linear": Method("init", "int_ext", "no_local_linear"),
@@ -96,6 +103,13 @@ def _with_true_principal_points(cameras: list[Camera], gt_cameras: list[Camera])
         K[:2, 2] = g.K[:2, 2]
         moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
     return moved
+
+
+def _true_joints_m(gt_poses3d: pd.DataFrame) -> np.ndarray:
+    """(N, 3) the valid, finite joints of a ``poses3d`` table, metres."""
+    valid = gt_poses3d[gt_poses3d["valid"]] if "valid" in gt_poses3d else gt_poses3d
+    points = valid[["x_m", "y_m", "z_m"]].to_numpy(dtype=np.float64)
+    return points[np.isfinite(points).all(axis=1)]
 
 
 def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Callable[[str], MotionVAE | None],
@@ -127,6 +141,12 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
                 f"`humancal train prior --variant {method.prior}`)")
             continue
         start = time.perf_counter()
+        if method.cameras == "convention_floor":
+            floor = self_calibration_floor(gt_cameras, _true_joints_m(gt_poses3d))
+            rows = camera_metrics(floor["cameras"], gt_cameras, detections, gt_associations)
+            say(f"{name}: {time.perf_counter() - start:.1f} s")
+            parts.append(metrics_table(spec.dataset, spec.sequence, name, rows, None))
+            continue
         people, skeletons, used, failed = associations, skeletons3d, cameras, failed_checks
         if method.cameras == "gt":
             if gt_association is None:

@@ -1,4 +1,5 @@
 import numpy as np
+import pandas as pd
 
 from evaluation.method_comparison import METHODS, _with_true_principal_points
 from humancal.camera import Camera
@@ -18,3 +19,33 @@ def test_known_principal_point_diagnostic_takes_only_the_principal_point_from_th
     np.testing.assert_array_equal(moved.distortion, estimated.distortion)
     np.testing.assert_array_equal(moved.t_cam_from_world_m, estimated.t_cam_from_world_m)
     assert estimated.K[0, 2] == 516.0  # the input is not changed in place
+
+
+def test_convention_floor_row_scores_the_best_centred_cameras_without_a_fit():
+    from evaluation.method_comparison import method_metric_table
+    from humancal.sequences import SequenceSpec
+
+    rng = np.random.default_rng(0)
+    truth = []
+    for k, angle in enumerate(np.linspace(0, 2 * np.pi, 4, endpoint=False)):
+        centre = np.array([5 * np.cos(angle), 5 * np.sin(angle), 2.0])
+        forward = -centre / np.linalg.norm(centre)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        R = np.stack([right, np.cross(forward, right), forward])
+        K = np.array([[1000.0, 0, 516.0 + 30 * (k % 2)], [0, 1000.0, 388.0 - 20], [0, 0, 1]])  # off centre
+        truth.append(Camera.from_center(K, R, centre, 1032, 776))
+    points = rng.uniform([-1.0, -1.0, 0.0], [1.0, 1.0, 1.8], size=(200, 3))
+    poses = pd.DataFrame({"sequence": "s", "frame": np.arange(200) // 20, "person_id": 0,
+                          "joint": [f"j{i % 20}" for i in range(200)], "x_m": points[:, 0], "y_m": points[:, 1],
+                          "z_m": points[:, 2], "valid": True})
+    poses.loc[0, "valid"] = False
+    table = method_metric_table(
+        SequenceSpec("synthetic", "s", "synthetic"), methods=["convention_floor"], priors=lambda name: None, body=None,
+        config=None, fps=30.0, dense=None, lifted=None, detections=None, associations=None, skeletons3d=None,
+        cameras=truth, gt_associations=None, gt_poses3d=poses, gt_cameras=truth, gt_motions=None)
+    mean = table[table["view"].isna()].set_index("metric")["value"]
+    assert set(mean.index) == {"focal_error_pct", "position_error_mm", "angle_error_deg"}
+    assert set(table["method"]) == {"convention_floor"} and table["failed_checks"].isna().all()
+    # About 30-36 px off centre at f = 1000 px: the cameras turn by about 2 degrees to make up for it.
+    assert 1.0 < mean["angle_error_deg"] < 2.5 and mean["position_error_mm"] > 1.0

@@ -50,7 +50,7 @@ def materialized(tmp_path_factory, body_model):
                                 selection=dg.AssetSelection.assets(*ASSETS), partition_key=PARTITION,
                                 instance=instance, run_config={"ops": {
                                     "body_fit": {"config": FIT}, "metric_tables": {"config": FIT},
-                                    "method_tables": {"config": {**FIT, "methods": METHODS}}}})
+                                    "method_tables": {"config": {**FIT, "methods": [*METHODS, "convention_floor"]}}}})
     return result, storage, scene, defs
 
 
@@ -119,7 +119,11 @@ def test_fitted_motions_and_body_metric_rows(materialized):
     assert meta["reprojection_error_px"].value < 15
     metrics = _read(storage, "metric_tables")
     methods = _read(storage, "method_tables")
-    assert set(methods["method"]) == set(METHODS)
+    assert set(methods["method"]) == {*METHODS, "convention_floor"}
+    # the synthetic cameras have centred principal points and square pixels: the convention costs them nothing
+    floor = methods[(methods["method"] == "convention_floor") & methods["view"].isna()].set_index("metric")["value"]
+    assert floor["angle_error_deg"] < 1e-3 and floor["focal_error_pct"] < 1e-3, floor.to_dict()
+    assert "reprojection_error_px" in floor.index and "mpjpe_mm" not in floor.index
     both = pd.concat([metrics, methods], ignore_index=True)
     both = both[both["view"].isna()]
     expected = {"mpjpe_mm", "pa_mpjpe_mm", "pcp_avg", "accel_error_mm_s2", "pve_mm", "fit_reprojection_error_px",
