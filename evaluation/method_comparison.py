@@ -142,7 +142,11 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
             continue
         start = time.perf_counter()
         if method.cameras == "convention_floor":
-            floor = self_calibration_floor(gt_cameras, _true_joints_m(gt_poses3d))
+            joints = _true_joints_m(gt_poses3d)
+            if len(gt_cameras) < 2 or len(joints) < 6:
+                say(f"{name}: needs 2 true cameras and 6 true joints, got {len(gt_cameras)} and {len(joints)}: skipped")
+                continue
+            floor = self_calibration_floor(gt_cameras, joints)
             rows = camera_metrics(floor["cameras"], gt_cameras, detections, gt_associations)
             say(f"{name}: {time.perf_counter() - start:.1f} s")
             parts.append(metrics_table(spec.dataset, spec.sequence, name, rows, None))

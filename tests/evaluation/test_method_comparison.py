@@ -49,3 +49,12 @@ def test_convention_floor_row_scores_the_best_centred_cameras_without_a_fit():
     assert set(table["method"]) == {"convention_floor"} and table["failed_checks"].isna().all()
     # About 30-36 px off centre at f = 1000 px: the cameras turn by about 2 degrees to make up for it.
     assert 1.0 < mean["angle_error_deg"] < 2.5 and mean["position_error_mm"] > 1.0
+
+    # Too few true joints: the row is left out with a log line, the table is not broken.
+    said = []
+    empty = method_metric_table(
+        SequenceSpec("synthetic", "s", "synthetic"), methods=["convention_floor"], priors=lambda name: None, body=None,
+        config=None, fps=30.0, dense=None, lifted=None, detections=None, associations=None, skeletons3d=None,
+        cameras=truth, gt_associations=None, gt_poses3d=poses.iloc[:4], gt_cameras=truth, gt_motions=None,
+        log=said.append)
+    assert empty.empty and "skipped" in said[0]
