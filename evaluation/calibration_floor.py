@@ -1,9 +1,9 @@
 """What a self-calibration convention costs by itself: camera errors left with perfect detections.
 
 A self-calibration that holds every principal point at the image centre (humancal's and the paper's), and gives
-each view one focal length (square pixels: humancal's; the paper fits fx and fy), cannot represent a real camera whose principal point is off
-centre or whose pixels are not square. Even from exact, noise-free projections of known points, its best
-cameras are then off the true ones. Two measures of how far (ground truth only: diagnostics, never a method path):
+each view one focal length (square pixels: humancal's; the paper fits fx and fy), cannot represent a real camera
+whose principal point is off centre or whose pixels are not square. Even from exact, noise-free projections of
+known points, its best cameras are then off the true ones. Two measures of how far (ground truth only: diagnostics, never a method path):
 
 * :func:`self_calibration_floor`: the whole rig re-estimated at once under the convention, the way a
   self-calibration does it: every view's pose and focal length and every 3D point free, least squares on the exact
@@ -89,7 +89,8 @@ def self_calibration_floor(
     seen, visible = [], []
     for cam in ground_truth:
         px, depth = project_points(cam, X)
-        inside = (depth > 0) & np.isfinite(px).all(-1) & (px >= 0).all(-1) & (px < [cam.width_px, cam.height_px]).all(-1)
+        in_image = (px >= 0).all(-1) & (px < [cam.width_px, cam.height_px]).all(-1)
+        inside = (depth > 0) & np.isfinite(px).all(-1) & in_image
         seen.append(np.where(inside[:, None], px, 0.0))
         visible.append(inside)
     seen_px, visible = np.stack(seen), np.stack(visible)  # (V, N, 2), (V, N)

@@ -24,9 +24,9 @@ self-calibrated row holds at the image centre, costs on this sequence (ground tr
 ``convention_floor`` is not a fit: the cameras that the self-calibration's convention (principal points at the
 image centres, one focal length per view) allows at best, fitted to exact projections of the true 3D joints
 (:func:`evaluation.calibration_floor.self_calibration_floor`; ground truth in a diagnostic row only). Camera rows
-only; no calibration from detections is expected below it. ``int_ext_no_bundle`` is not one of them either: ``int_ext`` without the bundle-adjusted start, the joint
-refinement straight from the init cameras (the paper's schedule, and the pipeline's until the bundle start was
-chosen).
+only; no calibration from detections is expected below it. ``int_ext_no_bundle`` is not one of the paper's rows
+either: ``int_ext`` without the bundle-adjusted start, the joint refinement straight from the init cameras (the
+paper's schedule, and the pipeline's until the bundle start was chosen).
 
 Every method gets the rows of :func:`evaluation.body_metrics.camera_and_body_rows`: the body rows, its fitted
 keypoints' reprojection error named ``fit_reprojection_error_px`` (``reprojection_error_px`` is the camera row's name).
@@ -64,8 +64,9 @@ __all__ = ["METHODS", "Method", "method_metric_table"]
 @dataclass(frozen=True)
 class Method:
     """One regime: where the cameras start (``init``, ``gt``, ``gt_intrinsics``, ``gt_principal_point``,
-    ``bundle``; ``convention_floor``: no fit, see the module docstring), which of their parameters the fit moves (``fixed``, ``ext``, ``int_ext``), the prior variant (None:
-    no prior) and whether moving cameras start from a bundle adjustment (``BodyFitConfig.bundle_start``)."""
+    ``bundle``; ``convention_floor``: no fit, see the module docstring), which of their parameters the fit moves
+    (``fixed``, ``ext``, ``int_ext``), the prior variant (None: no prior) and whether moving cameras start from a
+    bundle adjustment (``BodyFitConfig.bundle_start``)."""
 
     cameras: str
     regime: str
