@@ -3,7 +3,8 @@
 A self-calibration that holds every principal point at the image centre (humancal's and the paper's), and gives
 each view one focal length (square pixels: humancal's; the paper fits fx and fy), cannot represent a real camera
 whose principal point is off centre or whose pixels are not square. Even from exact, noise-free projections of
-known points, its best cameras are then off the true ones. Two measures of how far (ground truth only: diagnostics, never a method path):
+known points, its best cameras are then off the true ones. Two measures of how far (ground truth only:
+diagnostics, never a method path):
 
 * :func:`self_calibration_floor`: the whole rig re-estimated at once under the convention, the way a
   self-calibration does it: every view's pose and focal length and every 3D point free, least squares on the exact

@@ -2,7 +2,8 @@
 
 Every self-calibrated camera of humancal, like the paper's, has its principal point at the image centre; humancal's
 has one focal length (square pixels), the paper's fx and fy. Shelf's calibrated cameras do not: principal points up
-to about 50 px off centre, and fx and fy up to 1.6 % apart. Two tables, both from exact, noise-free projections of the ground-truth joints:
+to about 50 px off centre, and fx and fy up to 1.6 % apart. Two tables, both from exact, noise-free projections
+of the ground-truth joints:
 
 1. each true camera's pose alone re-estimated with its principal point moved to the centre
    (:func:`evaluation.camera_metrics.centred_principal_point_floor`; no alignment);
