@@ -11,7 +11,9 @@ diagnostics, never a method path):
   projections of the true points, started at the truth. Scored with the benchmark's own protocol
   (:func:`evaluation.camera_metrics.camera_errors`: similarity alignment of the centres), so its figures are
   directly comparable with the ``init`` / ``int_ext`` rows. A calibration from real detections that lands below
-  this floor does so by luck of its errors, not by what the images say.
+  this floor does so by luck of its errors, not by what the images say. scipy is used rather than the body fit's
+  bundle adjustment (:mod:`humancal.fitting.bundle`) because the conventions compared include one it does not
+  model (separate fx and fy); under humancal's convention the two land on the same rig (a test checks it).
 * :func:`evaluation.camera_metrics.centred_principal_point_floor`: each true camera's pose alone re-estimated with a
   centred principal point (focal, other cameras and the points kept true; no alignment).
 """

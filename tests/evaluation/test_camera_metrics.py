@@ -5,7 +5,6 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from evaluation.calibration_floor import self_calibration_floor
 from evaluation.camera_metrics import (
     camera_errors,
     camera_metrics,
@@ -145,62 +144,3 @@ def test_centred_principal_point_floor_is_the_offset_seen_as_a_rotation():
     with pytest.raises(ValueError, match="at least 6 points"):
         centred_principal_point_floor(centred, points[:5])
 
-
-def _with_intrinsics(cams, change):
-    return [Camera(change(c.K.copy()), c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px) for c in cams]
-
-
-def test_self_calibration_floor_sees_an_off_centre_principal_point_as_a_turn():
-    points = np.random.default_rng(3).uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 1.8], size=(300, 3))
-    offset = np.array([40.0, -25.0])
-
-    def shifted(K):
-        K[:2, 2] += offset
-        return K
-
-    moved = _with_intrinsics(_rig(4), shifted)
-    floor = self_calibration_floor(moved, points)
-    focal = np.array([c.K[0, 0] for c in moved])
-    # The whole rig refitted with centred principal points: every camera turns by about the angle the offset
-    # subtends, the centres and focal lengths move, and the images show it by about a pixel only.
-    np.testing.assert_allclose(floor["angle_error_deg"], np.degrees(np.arctan(np.hypot(*offset) / focal)), rtol=0.15)
-    assert (floor["position_error_mm"] > 5).all() and (floor["residual_px"] < 2.0).all()
-    assert len(floor["cameras"]) == 4 and np.allclose([c.K[:2, 2] for c in floor["cameras"]], [640, 360])
-
-    # With the true principal points allowed, nothing is left.
-    exact = self_calibration_floor(moved, points, centred_principal_point=False)
-    for key in ("focal_error_pct", "position_error_mm", "angle_error_deg", "residual_px"):
-        np.testing.assert_allclose(exact[key], 0.0, atol=1e-3)
-
-
-def test_self_calibration_floor_of_non_square_pixels_is_a_focal_error():
-    points = np.random.default_rng(4).uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 1.8], size=(300, 3))
-
-    def stretched(K):
-        K[0, 0] *= 1.04
-        return K
-
-    rig = _with_intrinsics(_rig(4), stretched)
-    floor = self_calibration_floor(rig, points)
-    assert (floor["focal_error_pct"] > 0.5).all() and (floor["angle_error_deg"] < 1.0).all()
-    assert floor["focal_error_pct"].mean() > 1.0
-    free = self_calibration_floor(rig, points, square_pixels=False)
-    np.testing.assert_allclose(free["focal_error_pct"], 0.0, atol=1e-3)
-    with pytest.raises(ValueError, match="at least 2 cameras and 6 finite points"):
-        self_calibration_floor(rig, points[:5])
-
-
-def test_self_calibration_floor_with_a_free_k1_fits_at_least_as_well():
-    points = np.random.default_rng(5).uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 1.8], size=(300, 3))
-
-    def shifted(K):
-        K[:2, 2] += (30.0, 20.0)
-        return K
-
-    rig = _with_intrinsics(_rig(4), shifted)
-    without = self_calibration_floor(rig, points)
-    with_k1 = self_calibration_floor(rig, points, free_k1=True)
-    # One more parameter per view: the residual left does not rise, and the k1 is used.
-    assert with_k1["residual_px"].mean() <= without["residual_px"].mean() + 1e-6
-    assert np.abs([c.distortion[0] for c in with_k1["cameras"]]).max() > 1e-4
-    assert all(c.distortion[0] == 0 for c in without["cameras"])
