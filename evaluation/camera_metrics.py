@@ -18,7 +18,8 @@ Every metric is reported per view (the row's ``view`` column) and as the mean ov
 
 :func:`centred_principal_point_floor` measures what the convention of the self-calibration (the principal point at the
 image centre, the paper's too) costs by itself: each true camera's pose re-estimated, with its principal point moved to
-the image centre, from the exact projections of known 3D points.
+the image centre, from the exact projections of known 3D points (per camera; the whole-rig floor, scored like the
+benchmark's rows, is :mod:`evaluation.calibration_floor`).
 """
 
 from __future__ import annotations
@@ -70,8 +71,10 @@ def centred_principal_point_floor(ground_truth: list[Camera], points_world_m: np
 
     Each true camera's intrinsics get their principal point moved to the image centre (``width/2, height/2``; focal and
     distortion kept); its pose is then re-estimated (``cv2.solvePnP``, started from the true pose) from the exact,
-    noise-free projections of ``points_world_m`` through the true camera. A self-calibration with that convention and
-    perfect detections of the same points ends no closer than this.
+    noise-free projections of ``points_world_m`` through the true camera, the other cameras and the points held
+    true and nothing aligned. It shows how each camera turns to make up for its offset; it is not a bound on the
+    benchmark's aligned errors (a whole rig fitted under the convention can turn together and land closer: that
+    floor is :func:`evaluation.calibration_floor.self_calibration_floor`).
 
     Args:
         ground_truth: V true cameras.
