@@ -149,7 +149,7 @@ def build_motion_prior_assets(
         group_name="motion_prior",
         partitions_def=PRIOR_VARIANT_PARTITIONS,
         metadata={**table_metadata("metrics"), ON_REQUEST_KEY: TRAIN_COMMAND},
-        code_version="1",
+        code_version="2",  # 2: the fit weights of DENOISE_FIT_CONFIGS chosen again for the 40-epoch priors
     )
     def prior_metrics(
         context: dg.AssetExecutionContext, torch_runtime: TorchResource, body_model: BodyModelResource,

@@ -55,6 +55,13 @@ def _weights(items: list[str]) -> dict[str, str]:
     return out
 
 
+_TUNE_LATENT = (1e-3,)
+"""Latent weights of the ``--tune`` grid (1e-4 and 1e-2 changed MPJPE by under 0.05 mm: docs/motion_prior.md)."""
+_TUNE_LOCAL_LINEAR = (30.0, 100.0, 300.0, 1000.0)
+"""Local-linear weights of the ``--tune`` grid (1 to 3000 were tried with the 20-epoch priors; 1000 was already
+too strong and 30 too weak)."""
+
+
 def _tune(body, clips, priors, args) -> None:
     train = [c for c in clips if c.subject not in HELD_OUT_CMU_SUBJECTS and c.subject not in args.subjects]
     segments = motion_segments(train, args.frames, args.segments, seed=args.seed + 1)
@@ -69,7 +76,7 @@ def _tune(body, clips, priors, args) -> None:
         for variant, prior in priors.items():
             method = denoise_method(variant)
             base = DENOISE_FIT_CONFIGS[method].replace(iterations=args.iterations or 300)
-            for latent, local_linear in itertools.product((1e-4, 1e-3, 1e-2), (1.0, 10.0, 100.0, 1000.0)):
+            for latent, local_linear in itertools.product(_TUNE_LATENT, _TUNE_LOCAL_LINEAR):
                 config = base.replace(weight_latent=latent, weight_local_linear=local_linear)
                 r = denoising_benchmark(body, segments, {variant: prior}, {method: config}, setting, args.seed,
                                         include_no_prior=False)
@@ -80,6 +87,10 @@ def _tune(body, clips, priors, args) -> None:
     best = table.loc[table.groupby(["method", "setting"])["mpjpe_mm"].idxmin()]
     print("\nlowest MPJPE per method and setting (training subjects):")
     print(best.to_string(float_format=lambda v: f"{v:.4g}"))
+    priors_only = table.dropna(subset=["weight_local_linear"])
+    summed = priors_only.groupby(["method", "weight_latent", "weight_local_linear"])["mpjpe_mm"].sum()
+    print("\nthe rule of DENOISE_FIT_CONFIGS, lowest MPJPE summed over the settings, per method:")
+    print(summed.loc[summed.groupby(level="method").idxmin()].to_string(float_format=lambda v: f"{v:.4g}"))
 
 
 def main() -> None:

@@ -125,9 +125,9 @@ def test_changed_weights_fail_the_digest(saved):
 def test_shipped_prior_is_valid():
     model, info = shipped_prior()
     assert info["config"]["variant"] == "motion_prior" and model.latent_dim == 32
-    # The issue asks for <= 15 mm; the shipped prior measures 17.5 mm (docs/motion_prior.md): this guards
-    # against a worse one being shipped, it does not claim the target.
-    assert info["held_out"]["mpjpe_mm"] <= 18.0
+    # The issue asks for <= 15 mm; the shipped prior measures 13.8 mm on its 16-frame held-out windows (13.6 mm
+    # in the body fit's windows, docs/motion_prior.md).
+    assert info["held_out"]["mpjpe_mm"] <= 15.0
     assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
     assert len(info["history"]) == info["config"]["epochs"] + 1
     assert SHIPPED_PRIOR_STEM.with_suffix(".safetensors").stat().st_size < 20e6
@@ -136,14 +136,14 @@ def test_shipped_prior_is_valid():
 def test_shipped_per_frame_prior_is_valid_and_unknown_variants_are_refused():
     model, info = shipped_prior("per_frame")
     assert info["config"]["variant"] == "per_frame" and model.latent_dim == 32 and not model.config.temporal
-    assert info["held_out"]["mpjpe_mm"] <= 21.0  # measured 19.6 mm (docs/motion_prior.md)
+    assert info["held_out"]["mpjpe_mm"] <= 18.0  # measured 16.6 mm (docs/motion_prior.md)
     assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
     with pytest.raises(PriorWeightsError, match=r"no shipped weights of the prior variant 'bidirectional_lstm'"):
         shipped_prior("bidirectional_lstm")
 
 
-@pytest.mark.parametrize("variant, measured_mm", [("no_skip", 18.3), ("unidirectional", 19.1),
-                                                  ("no_local_linear", 16.8)])
+@pytest.mark.parametrize("variant, measured_mm", [("no_skip", 14.5), ("unidirectional", 14.7),
+                                                  ("no_local_linear", 13.1)])
 def test_shipped_ablation_priors_are_valid(variant, measured_mm):
     assert variant in SHIPPED_VARIANT_STEMS
     model, info = shipped_prior(variant)
