@@ -91,6 +91,7 @@ def _configs_digest(configs: Mapping[str, PriorConfig]) -> str:
 def build_motion_prior_assets(
     configs: Mapping[str, PriorConfig] | None = None,
     evaluation: PriorEvaluationSettings | None = None,
+    train_workers: int = 2,
 ) -> list[dg.AssetsDefinition]:
     """``motion_prior_checkpoint`` and ``prior_metrics``, partitioned by variant.
 
@@ -98,18 +99,26 @@ def build_motion_prior_assets(
         configs: training configuration by variant (default :meth:`PriorConfig.default` of each; tests use tiny
             ones). Their digest is part of the checkpoint's code version.
         evaluation: size of the denoising benchmark (default :class:`PriorEvaluationSettings`).
+        train_workers: processes sharing each training step (``humancal.prior.train_motion_prior``'s ``workers``,
+            one intra-op thread each; 2 suits a 2-core machine). Part of the checkpoint's code version: the
+            worker count changes the windows drawn.
     """
     configs = dict(configs or {v: PriorConfig.default(v) for v in PRIOR_VARIANTS})
     missing = [v for v in PRIOR_VARIANTS if v not in configs or configs[v].variant != v]
     if missing:
         raise ValueError(f"build_motion_prior_assets: configs needs one PriorConfig per variant; wrong or missing: {missing}")
     evaluation = evaluation or PriorEvaluationSettings()
+    undivided = [v for v in PRIOR_VARIANTS if isinstance(train_workers, int) and train_workers >= 1
+                 and configs[v].batch_size % train_workers]
+    if isinstance(train_workers, bool) or not isinstance(train_workers, int) or train_workers < 1 or undivided:
+        raise ValueError(f"build_motion_prior_assets: train_workers={train_workers!r} must be a positive integer "
+                         f"dividing every variant's batch_size (not: {undivided})")
 
     @dg.asset(
         group_name="motion_prior",
         partitions_def=PRIOR_VARIANT_PARTITIONS,
         io_manager_key="checkpoint_io_manager",
-        code_version=f"1-{_configs_digest(configs)}",
+        code_version=f"2-{_configs_digest(configs)}-{train_workers}w",
         metadata={ON_REQUEST_KEY: TRAIN_COMMAND},
     )
     def motion_prior_checkpoint(
@@ -129,7 +138,7 @@ def build_motion_prior_assets(
 
         body = body_model.get()
         with torch_runtime.applied():
-            trained = train_motion_prior(clips, config, body, progress=progress)
+            trained = train_motion_prior(clips, config, body, progress=progress, workers=train_workers)
         checkpoint = prior_checkpoint(trained)
         with tempfile.TemporaryDirectory() as tmp:
             pictures = _pictures(trained.model, body, clips, checkpoint, Path(tmp), config.variant)

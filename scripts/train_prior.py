@@ -11,7 +11,7 @@ writes the weights pair (``<out>.safetensors`` + ``<out>.json``, ``humancal.prio
 repository. ``--ship`` also writes the weights humancal ships (``humancal/weights/motion_prior.*``); that is
 how the shipped weights were made.
 
-    python scripts/train_prior.py [--variant motion_prior] [--seed 0] [--threads 2] [--out /tmp/humancal_prior/x]
+    python scripts/train_prior.py [--variant motion_prior] [--seed 0] [--workers 2] [--threads 1] [--out /tmp/humancal_prior/x]
                                   [--epochs N] [--steps-per-epoch N] [--learning-rate LR] [--weight-local-linear W]
                                   [--exclude-subjects 02,14 --held-out-subjects 06]   # settings chosen on a validation subject
     python scripts/train_prior.py --ship            # retrain the shipped weights
@@ -72,7 +72,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variant", default="motion_prior", choices=PRIOR_VARIANTS, help="PriorConfig.variant")
     parser.add_argument("--seed", type=int, default=0, help="PriorConfig.seed")
-    parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    parser.add_argument("--workers", type=int, default=2,
+                        help="processes sharing each step's batch (data parallel; one per core is fastest)")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads of each worker")
     parser.add_argument(
         "--out", type=Path, help="weights stem (outside the repo); default <tmp>/humancal_prior/<variant>"
     )
@@ -101,6 +103,8 @@ def main() -> None:
     if out.is_relative_to(REPO_ROOT):
         parser.error(f"--out {out} is inside the repository; trained weights are artifacts, keep them outside")
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    if args.workers < 1 or args.threads < 1:
+        parser.error("--workers and --threads must be positive")
     torch.set_num_threads(args.threads)
 
     from humancal.body import BodyModel
@@ -119,12 +123,14 @@ def main() -> None:
     print(f"{len(clips)} clips, {sum(len(c.bone_rotmats_local) for c in clips)} frames; held out: {list(held_out)}")
     print(f"config {config.digest()}: variant {config.variant}, hidden {config.hidden_size}, latent "
           f"{config.latent_dim}, {config.epochs} epochs x {config.steps_per_epoch} steps x {config.batch_size} "
-          f"windows of {config.clip_frames} frames, {args.threads} thread(s)")
-    trained = train_motion_prior(clips, config, body_model, progress=_print_epoch, held_out_subjects=held_out)
-    command = f"python scripts/train_prior.py --variant {args.variant} --seed {args.seed} --threads {args.threads}"
+          f"windows of {config.clip_frames} frames, {args.workers} worker(s) of {args.threads} thread(s)")
+    trained = train_motion_prior(clips, config, body_model, progress=_print_epoch, held_out_subjects=held_out,
+                                 workers=args.workers, threads=args.threads)
+    command = (f"python scripts/train_prior.py --variant {args.variant} --seed {args.seed} --workers {args.workers} "
+               f"--threads {args.threads}")
     extra = f" --held-out-subjects {args.held_out_subjects}" if held_out != tuple(HELD_OUT_CMU_SUBJECTS) else ""
     extra += f" --exclude-subjects {','.join(sorted(excluded))}" if excluded else ""
-    info = {"trained_with": command + _overrides_text(overrides) + extra, "threads": args.threads}
+    info = {"trained_with": command + _overrides_text(overrides) + extra, "threads": args.threads, "workers": args.workers}
     sidecar = save_prior(trained, out, info)
     if args.ship:
         save_prior(trained, SHIPPED_PRIOR_STEM, {**info, "trained_with": command + " --ship"})

@@ -58,8 +58,9 @@ class PriorConfig:
         hidden_size: GRU hidden size per direction (the per-frame variant: width of its MLPs).
         head_width: width of the hidden layer of the mean / log-variance heads and of the decoder's output head.
         clip_frames: frames of one training window.
-        epochs: passes of ``steps_per_epoch`` optimisation steps (40: with 20 the held-out error was still
-            falling when the learning rate ran out, 17.5 mm against 13.8 with 40; `docs/motion_prior.md`).
+        epochs: passes of ``steps_per_epoch`` optimisation steps (36: with 20 the held-out error was still
+            falling when the learning rate ran out, 17.5 mm against 13.8 with 40; 36 is what two workers train
+            within 15 minutes on 2 cores; `docs/motion_prior.md`).
         steps_per_epoch: optimisation steps per epoch (each draws a fresh batch of augmented windows).
         batch_size: windows per optimisation step.
         learning_rate: peak AdamW learning rate.
@@ -86,7 +87,7 @@ class PriorConfig:
     hidden_size: int = 128
     head_width: int = 256
     clip_frames: int = 16
-    epochs: int = 40
+    epochs: int = 36
     steps_per_epoch: int = 200
     batch_size: int = 128
     learning_rate: float = 2e-3

@@ -7,22 +7,37 @@ with a per-step cosine decay of the learning rate. After every epoch the model r
 windows (plain: speed 1, forward, not mirrored) from their posterior means and is scored by the MPJPE of the 23
 canonical keypoints (root at the origin, identity root rotation; :func:`humancal.prior.losses.pose_keypoints_m`).
 
+Data parallel on several cores (``workers > 1``): each worker process draws and differentiates its own
+``batch_size / workers`` windows with one intra-op thread, and the workers average their gradients
+(``torch.distributed``, gloo) before every identical AdamW step, so the optimisation is that of the whole batch.
+The networks are small and their operations tiny: a second intra-op thread bought a 2-core machine little (one
+thread: about 30 s an epoch; two: about 26 s), two single-threaded workers much more (see ``docs/motion_prior.md``).
+The calling process is worker 0 (validation, progress, the result); the others are spawned and build their own
+body model.
+
 Every random choice (windows, augmentation, initialisation, the reparameterisation noise) derives from
-``config.seed``: the same clips and config give the same weights, bit for bit, on the same machine and thread
-count. The global torch random state is left untouched.
+``config.seed``: the same clips, config and worker count give the same weights, bit for bit, on the same machine
+and thread count. The global torch random state is left untouched. One worker draws exactly the windows and noise
+it drew before workers existed (the shipped weights were trained so).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import shutil
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from datetime import timedelta
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+import torch.distributed as dist
+import torch.multiprocessing as torch_mp
 
 from humancal.body.rest import RestSkeleton
 from humancal.lifter.evaluate import HELD_OUT_CMU_SUBJECTS
@@ -30,6 +45,7 @@ from humancal.prior.config import PriorConfig
 from humancal.prior.data import MotionClips, MotionWindows, clips_from_retargeted, sample_windows
 from humancal.prior.losses import pose_keypoints_m, prior_losses
 from humancal.prior.model import MotionVAE, pose6d_to_rotmats, rotmats_to_pose6d
+from humancal.retarget.threads import torch_threads
 
 __all__ = ["TrainedPrior", "train_motion_prior", "reconstruction_mpjpe_mm", "clip_rest_skeletons"]
 
@@ -38,6 +54,9 @@ logger = logging.getLogger(__name__)
 ProgressCallback = Callable[[dict[str, Any]], None]
 
 _EVAL_CHUNK = 256
+_LOSS_NAMES = ("total", "pose6d", "keypoints_m2", "kl", "local_linear", "keypoint_error_m")
+_WORKER_TIMEOUT = timedelta(minutes=5)
+"""How long a worker waits for the others (start-up, then every gradient exchange) before giving up."""
 
 
 @dataclass(frozen=True)
@@ -52,8 +71,8 @@ class TrainedPrior:
             ``train_keypoints_m2``, ``train_kl``, ``train_local_linear``, ``train_keypoint_error_mm``
             (NaN for epoch 0), the held-out ``val_mpjpe_mm`` and ``val_kl``, and ``elapsed_s``.
         train_seconds: wall time of the whole training (validation included), seconds.
-        train_cpu_seconds: CPU time of this process over the training (all threads summed), seconds; on a
-            shared machine it tells the work apart from the waiting.
+        train_cpu_seconds: CPU time of this process over the training (all threads summed; with several workers,
+            worker 0's alone), seconds; on a shared machine it tells the work apart from the waiting.
         train_subjects: subjects of the training clips.
         held_out_subjects: subjects of the held-out clips.
         held_out: final held-out figures: ``mpjpe_mm`` (posterior-mean reconstruction), ``kl``, ``windows``.
@@ -139,6 +158,8 @@ def train_motion_prior(
     body_model,
     progress: ProgressCallback | None = None,
     held_out_subjects: Sequence[str] = HELD_OUT_CMU_SUBJECTS,
+    workers: int = 1,
+    threads: int | None = None,
 ) -> TrainedPrior:
     """Train a motion prior.
 
@@ -150,29 +171,36 @@ def train_motion_prior(
         progress: called after every epoch with ``{"kind": "epoch"}`` plus the history record (epoch 0 first).
             Records are also logged at INFO.
         held_out_subjects: subjects whose clips are held out of training (whole subjects) and score each epoch.
+        workers: processes sharing each step's batch (data parallel, module docstring); 1 trains here alone.
+            ``config.batch_size`` must be a multiple of it. The other workers are started with the "spawn"
+            method, so a script calling this at its top level needs Python's ``if __name__ == "__main__":`` guard.
+        threads: torch intra-op threads of each worker; None: the caller's setting with one worker, 1 with more.
 
     Returns:
         The :class:`TrainedPrior`.
 
     Raises:
-        ValueError: malformed clips, or holding out ``held_out_subjects`` leaves no training or no held-out clip.
+        ValueError: malformed clips, holding out ``held_out_subjects`` leaves no training or no held-out clip, a bad
+            worker or thread count, or ``workers > 1`` while this process already has a ``torch.distributed`` group.
+        RuntimeError: a worker process failed (its error is in the message).
     """
     config = PriorConfig.default() if config is None else config
     if not isinstance(config, PriorConfig):
         raise ValueError(f"config must be a PriorConfig, got {type(config).__name__}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1 or config.batch_size % workers:
+        raise ValueError(f"workers={workers!r} must be a positive integer dividing PriorConfig.batch_size="
+                         f"{config.batch_size}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ValueError(f"threads={threads!r} must be a positive integer or None")
+    if workers > 1 and dist.is_available() and dist.is_initialized():
+        raise ValueError("workers > 1 needs a process without a torch.distributed group; this one has one")
+    threads = threads if threads is not None else (None if workers == 1 else 1)
     all_clips = clips if isinstance(clips, MotionClips) else clips_from_retargeted(clips)
     train_clips, val_clips = all_clips.split_subjects(held_out_subjects)
     start, start_cpu = time.perf_counter(), time.process_time()
     seeds = np.random.SeedSequence(config.seed).spawn(config.epochs + 1)
     val_windows = sample_windows(val_clips, config.validation_windows, config, np.random.default_rng(seeds[0]), False)
-    train_rest = clip_rest_skeletons(body_model, train_clips)
     val_rest = clip_rest_skeletons(body_model, val_clips)
-    total_steps = config.epochs * config.steps_per_epoch
-    weights = {
-        "weight_6d": config.weight_6d,
-        "weight_keypoints": config.weight_keypoints,
-        "weight_local_linear": config.local_linear_weight,
-    }
     history: list[dict[str, Any]] = []
 
     def report(epoch: int, step: int, lr: float, terms: dict[str, list[float]], model: MotionVAE) -> None:
@@ -202,20 +230,68 @@ def train_motion_prior(
         if progress is not None:
             progress({"kind": "epoch", **record})
 
-    names = ("total", "pose6d", "keypoints_m2", "kl", "local_linear", "keypoint_error_m")
+    with torch_threads(threads):
+        if workers == 1:
+            model = _optimise(train_clips, config, body_model, 0, 1, report)
+        else:
+            model = _optimise_with_workers(train_clips, config, body_model, workers, threads, report)
+        final = reconstruction_mpjpe_mm(model, val_windows, val_rest, body_model)
+    return TrainedPrior(
+        model=model,
+        config=config,
+        history=history,
+        train_seconds=time.perf_counter() - start,
+        train_subjects=tuple(sorted(set(train_clips.subjects))),
+        held_out_subjects=tuple(sorted(set(val_clips.subjects))),
+        held_out=final,
+        data_digest=all_clips.digest(),
+        num_train_frames=int(train_clips.starts[-1]),
+        train_cpu_seconds=time.process_time() - start_cpu,
+    )
+
+
+def _optimise(
+    train_clips: MotionClips, config: PriorConfig, body_model, rank: int, workers: int,
+    report: Callable[[int, int, float, dict[str, list[float]], MotionVAE], None] | None,
+) -> MotionVAE:
+    """The optimisation loop of one worker (``rank`` of ``workers``; the only one when ``workers`` is 1).
+
+    Every worker builds the same initial model and takes the same steps with the gradients averaged over the
+    workers; each draws its own ``batch_size / workers`` windows and reparameterisation noise. ``report`` (worker
+    0 only) scores the model after every epoch.
+
+    Returns:
+        The trained model (eval mode).
+    """
+    train_rest = clip_rest_skeletons(body_model, train_clips)
+    total_steps = config.epochs * config.steps_per_epoch
+    batch = config.batch_size // workers
+    weights = {
+        "weight_6d": config.weight_6d,
+        "weight_keypoints": config.weight_keypoints,
+        "weight_local_linear": config.local_linear_weight,
+    }
+    if workers == 1:  # the streams of the single-process trainer the shipped weights came from
+        epoch_seeds = np.random.SeedSequence(config.seed).spawn(config.epochs + 1)
+        noise_seed = config.seed + 1
+    else:
+        epoch_seeds = [np.random.SeedSequence(config.seed, spawn_key=(epoch, rank)) for epoch in
+                       range(config.epochs + 1)]
+        noise_seed = int(np.random.SeedSequence(config.seed, spawn_key=(config.epochs + 1, rank)).generate_state(1)[0])
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         model = MotionVAE(config)
-        noise = torch.Generator().manual_seed(config.seed + 1)
+        noise = torch.Generator().manual_seed(noise_seed)
         optimizer = torch.optim.AdamW(model.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay)
-        report(0, 0, config.learning_rate, {name: [] for name in names}, model)
+        if report is not None:
+            report(0, 0, config.learning_rate, {name: [] for name in _LOSS_NAMES}, model)
         step, lr = 0, config.learning_rate
         for epoch in range(1, config.epochs + 1):
-            rng = np.random.default_rng(seeds[epoch])
-            terms: dict[str, list[float]] = {name: [] for name in names}
+            rng = np.random.default_rng(epoch_seeds[epoch])
+            terms: dict[str, list[float]] = {name: [] for name in _LOSS_NAMES}
             model.train()
             for _ in range(config.steps_per_epoch):
-                windows = sample_windows(train_clips, config.batch_size, config, rng)
+                windows = sample_windows(train_clips, batch, config, rng)
                 target_R = windows.bone_rotmats.to(body_model.dtype)
                 clip_rest = train_rest.select(torch.as_tensor(windows.clip_index))
                 with torch.no_grad():
@@ -231,22 +307,93 @@ def train_motion_prior(
                 )
                 optimizer.zero_grad(set_to_none=True)
                 losses["total"].backward()
+                values = torch.stack([losses[name].detach() for name in _LOSS_NAMES])
+                if workers > 1:
+                    _average_over_workers([p.grad for p in model.parameters()] + [values], workers)
                 optimizer.step()
                 step += 1
-                for name in names:
-                    terms[name].append(float(losses[name].detach()))
-            report(epoch, step, lr, terms, model)
+                for name, value in zip(_LOSS_NAMES, values.tolist()):
+                    terms[name].append(value)
+            if report is not None:
+                report(epoch, step, lr, terms, model)
         model.eval()
-    final = reconstruction_mpjpe_mm(model, val_windows, val_rest, body_model)
-    return TrainedPrior(
-        model=model,
-        config=config,
-        history=history,
-        train_seconds=time.perf_counter() - start,
-        train_subjects=tuple(sorted(set(train_clips.subjects))),
-        held_out_subjects=tuple(sorted(set(val_clips.subjects))),
-        held_out=final,
-        data_digest=all_clips.digest(),
-        num_train_frames=int(train_clips.starts[-1]),
-        train_cpu_seconds=time.process_time() - start_cpu,
+    return model
+
+
+def _average_over_workers(tensors: list[torch.Tensor], workers: int) -> None:
+    """Replace each tensor, in place, by its mean over the workers (one all-reduce of them all, flattened)."""
+    flat = torch.cat([t.reshape(-1) for t in tensors])
+    dist.all_reduce(flat)
+    flat /= workers
+    offset = 0
+    for t in tensors:
+        t.copy_(flat[offset:offset + t.numel()].view_as(t))
+        offset += t.numel()
+
+
+def _optimise_with_workers(
+    train_clips: MotionClips, config: PriorConfig, body_model, workers: int, threads: int,
+    report: Callable[[int, int, float, dict[str, list[float]], MotionVAE], None],
+) -> MotionVAE:
+    """:func:`_optimise` as worker 0 of ``workers``, the others spawned here and joined before returning.
+
+    Raises:
+        RuntimeError: a worker failed (its traceback in the message) or the exchange broke down.
+    """
+    folder = Path(tempfile.mkdtemp(prefix="humancal_prior_workers_"))
+    rendezvous = f"file://{folder / 'rendezvous'}"
+    spawned = torch_mp.start_processes(
+        _worker, args=(workers, rendezvous, train_clips, config, str(body_model.dtype), str(body_model.device),
+                       threads),
+        nprocs=workers - 1, join=False, start_method="spawn",
     )
+    logger.info("training with %d workers of %d thread(s) each", workers, threads)
+    try:
+        try:
+            dist.init_process_group("gloo", init_method=rendezvous, rank=0, world_size=workers,
+                                    timeout=_WORKER_TIMEOUT)
+            try:
+                model = _optimise(train_clips, config, body_model, 0, workers, report)
+            finally:
+                dist.destroy_process_group()
+        except RuntimeError as err:  # torch.distributed's errors (a worker gone, a timeout) are RuntimeErrors
+            failure = _worker_failure(spawned)
+            detail = f"{err}" + (f"; a worker reported: {failure}" if failure else "")
+            raise RuntimeError(f"motion-prior training with {workers} workers failed: {detail}") from err
+        while not spawned.join():  # raises the error of a worker that failed after the last exchange
+            pass
+    finally:
+        for process in spawned.processes:
+            process.join(timeout=30)
+            if process.is_alive():
+                process.terminate()
+        shutil.rmtree(folder, ignore_errors=True)
+    return model
+
+
+def _worker_failure(spawned) -> str:
+    """The error of a spawned worker that died, or '' (waits up to 30 s for one to end)."""
+    try:
+        spawned.join(timeout=30)
+    except (torch_mp.ProcessRaisedException, torch_mp.ProcessExitedException) as err:  # with the worker's traceback
+        return str(err)
+    return ""
+
+
+def _worker(index: int, workers: int, rendezvous: str, train_clips: MotionClips, config: PriorConfig, dtype: str,
+            device: str, threads: int) -> None:
+    """Entry point of spawned worker ``index + 1``: its own body model, then :func:`_optimise` without reports.
+
+    It joins the group first, so that a failure after that (the body model, say) closes its connection and worker 0
+    stops at its next exchange instead of waiting out the timeout.
+    """
+    from humancal.body import BodyModel
+
+    torch.set_num_threads(threads)
+    dist.init_process_group("gloo", init_method=rendezvous, rank=index + 1, world_size=workers,
+                            timeout=_WORKER_TIMEOUT)
+    try:
+        body_model = BodyModel(dtype=getattr(torch, dtype.removeprefix("torch.")), device=device)
+        _optimise(train_clips, config, body_model, index + 1, workers, None)
+    finally:
+        dist.destroy_process_group()

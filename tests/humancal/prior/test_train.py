@@ -78,6 +78,33 @@ def test_training_lowers_the_held_out_error(clips, body_model):
     assert history[-1]["val_mpjpe_mm"] < 0.9 * history[0]["val_mpjpe_mm"], [r["val_mpjpe_mm"] for r in history]
 
 
+def test_two_workers_share_each_step(clips, body_model):
+    """Two worker processes (data parallel): the same weights twice, other weights than one worker (each draws its
+    own half of the windows), the held-out error falls as with one, and no torch.distributed group is left."""
+    config = PriorConfig.tiny(seed=0).replace(
+        epochs=3, steps_per_epoch=15, batch_size=16, learning_rate=5e-3, head_width=64, hidden_size=32, latent_dim=16
+    )
+    records = []
+    a = train_motion_prior(clips, config, body_model, progress=records.append, held_out_subjects=("s2",), workers=2)
+    b = train_motion_prior(clips, config, body_model, held_out_subjects=("s2",), workers=2)
+    one = _train(clips, body_model, config)
+    assert all(torch.equal(_state(a)[k], _state(b)[k]) for k in _state(a))
+    assert any(not torch.equal(_state(a)[k], _state(one)[k]) for k in _state(a))
+    assert [r["epoch"] for r in records] == list(range(config.epochs + 1))
+    assert a.history[-1]["steps"] == config.epochs * config.steps_per_epoch
+    assert a.history[-1]["val_mpjpe_mm"] < 0.9 * a.history[0]["val_mpjpe_mm"], [r["val_mpjpe_mm"] for r in a.history]
+    assert not torch.distributed.is_initialized()
+    assert torch.get_num_threads() == 1  # the caller's setting (this module's fixture) is back
+
+
+def test_bad_worker_counts(clips, body_model):
+    for workers in (0, 3, 1.5, True):
+        with pytest.raises(ValueError, match="must be a positive integer dividing PriorConfig.batch_size=8"):
+            train_motion_prior(clips, PriorConfig.tiny(), body_model, held_out_subjects=("s2",), workers=workers)
+    with pytest.raises(ValueError, match="threads=0 must be a positive integer or None"):
+        train_motion_prior(clips, PriorConfig.tiny(), body_model, held_out_subjects=("s2",), threads=0)
+
+
 @pytest.mark.parametrize("variant", [v for v in PRIOR_VARIANTS if v != "motion_prior"])
 def test_every_variant_trains(clips, body_model, variant):
     trained = _train(clips, body_model, PriorConfig.tiny(variant).replace(epochs=1, steps_per_epoch=2))
