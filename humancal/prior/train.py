@@ -11,7 +11,8 @@ Data parallel on several cores (``workers > 1``): each worker process draws and 
 ``batch_size / workers`` windows with one intra-op thread, and the workers average their gradients
 (``torch.distributed``, gloo) before every identical AdamW step, so the optimisation is that of the whole batch.
 The networks are small and their operations tiny: a second intra-op thread bought a 2-core machine little (one
-thread: about 30 s an epoch; two: about 26 s), two single-threaded workers much more (see ``docs/motion_prior.md``).
+thread: about 30 s an epoch; two: about 26 s); two single-threaded workers were 9 % faster than two threads over a
+whole run there, and they grow with the cores (see ``docs/motion_prior.md``).
 The calling process is worker 0 (validation, progress, the result); the others are spawned and build their own
 body model.
 
@@ -52,6 +53,8 @@ __all__ = ["TrainedPrior", "train_motion_prior", "reconstruction_mpjpe_mm", "cli
 logger = logging.getLogger(__name__)
 
 ProgressCallback = Callable[[dict[str, Any]], None]
+_EpochReport = Callable[[int, int, float, dict[str, list[float]], "MotionVAE"], None]
+"""Worker 0's end-of-epoch scoring: ``(epoch, step, lr, training terms, model)``."""
 
 _EVAL_CHUNK = 256
 _LOSS_NAMES = ("total", "pose6d", "keypoints_m2", "kl", "local_linear", "keypoint_error_m")
@@ -252,7 +255,7 @@ def train_motion_prior(
 
 def _optimise(
     train_clips: MotionClips, config: PriorConfig, body_model, rank: int, workers: int,
-    report: Callable[[int, int, float, dict[str, list[float]], MotionVAE], None] | None,
+    report: _EpochReport | None,
 ) -> MotionVAE:
     """The optimisation loop of one worker (``rank`` of ``workers``; the only one when ``workers`` is 1).
 
@@ -333,7 +336,7 @@ def _average_over_workers(tensors: list[torch.Tensor], workers: int) -> None:
 
 def _optimise_with_workers(
     train_clips: MotionClips, config: PriorConfig, body_model, workers: int, threads: int,
-    report: Callable[[int, int, float, dict[str, list[float]], MotionVAE], None],
+    report: _EpochReport,
 ) -> MotionVAE:
     """:func:`_optimise` as worker 0 of ``workers``, the others spawned here and joined before returning.
 
