@@ -8,7 +8,11 @@ from the definitions altogether), adds the paper's numbers and the peer figures 
 markdown as metadata (``evaluation/benchmark.py``).
 
 It depends on the per-sequence tables it reads (those among the definitions and not computed on request only), so
-``humancal update`` computes it once every registered partition of them is up to date and never from a partial set;
+``humancal update`` computes it once every registered partition of them is up to date, never from a partial set of
+partitions that could still be brought up to date. Partitions that failed, or that a failed blocking check holds
+back, are left out instead of making it wait for ever: the update passes them with the reason as run config
+(``left_out``), the asset reads none of their tables (a stored one would be out of date) and says which it left out
+and why (log, metadata ``left_out``; ``humancal report --benchmark`` prints it).
 ``dagster asset materialize --select benchmark_table`` computes it from whatever is stored.
 """
 
@@ -27,7 +31,11 @@ from evaluation.benchmark import benchmark_markdown, benchmark_table, normalise_
 from evaluation.paper_results import PAPER_FILE, PEER_FILE, paper_results, peer_results
 from resources.io_managers import partition_path
 
-__all__ = ["BENCHMARK_INPUTS", "build_benchmark_assets", "read_partition_tables"]
+__all__ = ["BENCHMARK_INPUTS", "FAN_IN_CONFIG_KEY", "BenchmarkConfig", "build_benchmark_assets", "read_partition_tables"]
+
+FAN_IN_CONFIG_KEY = "humancal/left_out_config"
+"""Asset metadata of a fan-in asset (unpartitioned, reading every partition of a partitioned one) that takes the
+partitions to leave out as run config (``{"left_out": {partition: reason}}``; ``humancal update`` sets it)."""
 
 BENCHMARK_INPUTS = ("metric_tables", "method_tables")
 """The per-sequence ``metrics`` tables the benchmark reads, in this order (a figure in both keeps the later)."""
@@ -54,6 +62,18 @@ def read_partition_tables(storage_root: str | UPath, asset: str, partitions: Ite
     return tables, read
 
 
+class BenchmarkConfig(dg.Config):
+    """Run config of ``benchmark_table``, set by ``humancal update``."""
+
+    left_out: dict[str, str] = {}
+    """Partitions to leave out (not read even where a table is stored), each with the reason."""
+
+
+def left_out_markdown(left_out: dict[str, str]) -> str:
+    """The ``left_out`` metadata: one line per partition left out, with the reason."""
+    return "\n".join(f"- {partition}: {reason}" for partition, reason in sorted(left_out.items())) or "none"
+
+
 def build_benchmark_assets(storage_root: str, sequence_assets: Sequence[dg.AssetsDefinition]) -> list[dg.AssetsDefinition]:
     """``benchmark_table`` and ``stage_timings`` over the per-sequence assets ``sequence_assets``.
 
@@ -68,13 +88,17 @@ def build_benchmark_assets(storage_root: str, sequence_assets: Sequence[dg.Asset
     # An input computed on request only would make the update wait for it forever: read, not depended on.
     deps = [name for name in inputs if not (by_name[name].metadata or {}).get(ON_REQUEST_KEY)]
 
-    @dg.asset(name="benchmark_table", group_name=GROUP, deps=deps, metadata=table_metadata("benchmark"),
+    @dg.asset(name="benchmark_table", group_name=GROUP, deps=deps,
+              metadata={**table_metadata("benchmark"), FAN_IN_CONFIG_KEY: True},
               code_version=CODE_VERSION, automation_condition=UPDATE_CONDITION)
-    def benchmark_table_asset(context: dg.AssetExecutionContext) -> dg.Output:
+    def benchmark_table_asset(context: dg.AssetExecutionContext, config: BenchmarkConfig) -> dg.Output:
         """Every sequence's headline figures (``metric_tables`` and ``method_tables`` of every partition that has
-        them) beside the paper's numbers and the peers measured here, as one long table; the side-by-side markdown
-        is in the metadata (``evaluation/benchmark.py``)."""
-        registered = sorted(context.instance.get_dynamic_partitions(SEQUENCES.name))
+        them, but those the update leaves out) beside the paper's numbers and the peers measured here, as one long
+        table; the side-by-side markdown is in the metadata (``evaluation/benchmark.py``)."""
+        for partition, reason in sorted(config.left_out.items()):
+            context.log.warning(f"left out {partition}: {reason}")
+        registered = [p for p in sorted(context.instance.get_dynamic_partitions(SEQUENCES.name))
+                      if p not in config.left_out]
         tables, read = [], {}
         for name in BENCHMARK_INPUTS:
             if name not in inputs:
@@ -97,6 +121,7 @@ def build_benchmark_assets(storage_root: str, sequence_assets: Sequence[dg.Asset
             table, "benchmark", rows=len(table),
             partitions=dg.MetadataValue.md("\n".join(f"- {name}: {', '.join(parts) or 'none'}"
                                                      for name, parts in read.items()) or "none"),
+            left_out=dg.MetadataValue.md(left_out_markdown(config.left_out)),
             summary=dg.MetadataValue.md(markdown))
 
     return [benchmark_table_asset, build_stage_timings_asset(specs)]

@@ -40,6 +40,7 @@ __all__ = [
     "load_datasets_config",
     "user_config_path",
     "add_user_sequence",
+    "remove_user_sequences",
     "available_sequences",
     "partition_key",
     "parse_partition_key",
@@ -237,6 +238,54 @@ def add_user_sequence(dataset: str, sequence: str, kind: str, options: dict[str,
             f"{user}: partition {partition_key(dataset, sequence)} exists; choose another name or remove it there"
         )
     body.setdefault("sequences", {})[sequence] = options
+    _write_user_file(user, raw)
+    return SequenceSpec(dataset, sequence, kind, dict(options), str(user))
+
+
+def remove_user_sequences(dataset: str, sequence: str | None = None, user_path: Path | None = None,
+                          main_path: Path | None = None) -> list[str]:
+    """Remove a dataset (or one of its sequences) from the user datasets file, atomically.
+
+    Args:
+        dataset: the dataset name (as given to ``humancal add``).
+        sequence: remove this sequence only (default: the whole dataset; a dataset left without sequences goes).
+        user_path: the user datasets file (default :func:`user_config_path`).
+        main_path: the main config (default :func:`default_config_path`): its datasets cannot be removed.
+
+    Returns:
+        The partition keys removed.
+
+    Raises:
+        DatasetsConfigError: the dataset comes with the main config, or is not in the user datasets file (or has
+            no such sequence); the file is then left as it was.
+    """
+    user = Path(user_path) if user_path is not None else user_config_path()
+    main_file = Path(main_path) if main_path is not None else default_config_path()
+    if any(s.dataset == dataset for s in _load_one(main_file).values()):
+        raise DatasetsConfigError(f"dataset {dataset!r} comes with humancal ({main_file}); only the captures you "
+                                  f"added (the user datasets file {user}) can be removed")
+    raw = _read_raw(user) if user.is_file() else {"datasets": {}}
+    if user.is_file():
+        _load_one(user)  # a malformed user file is reported before anything is written
+    body = raw["datasets"].get(dataset)
+    if body is None:
+        known = sorted(raw["datasets"]) or ["none"]
+        raise DatasetsConfigError(f"{user}: no dataset {dataset!r}; your datasets: {', '.join(known)}")
+    sequences = body.get("sequences") or {}
+    if sequence is not None and sequence not in sequences:
+        raise DatasetsConfigError(f"{user}: datasets.{dataset} has no sequence {sequence!r}; its sequences: "
+                                  f"{', '.join(sequences)}")
+    removed = [sequence] if sequence is not None else list(sequences)
+    for name in removed:
+        del sequences[name]
+    if not sequences:
+        del raw["datasets"][dataset]
+    _write_user_file(user, raw)
+    return [partition_key(dataset, name) for name in removed]
+
+
+def _write_user_file(user: Path, raw: dict) -> None:
+    """Write the user datasets file atomically (a temporary sibling renamed over it)."""
     user.parent.mkdir(parents=True, exist_ok=True)
     text = "# Users' own captures (humancal add, the inbox sensor); merged with the packaged datasets config.\n"
     text += yaml.safe_dump(raw, sort_keys=False)
@@ -248,4 +297,3 @@ def add_user_sequence(dataset: str, sequence: str, kind: str, options: dict[str,
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    return SequenceSpec(dataset, sequence, kind, dict(options), str(user))

@@ -34,6 +34,7 @@ def run_benchmark(args, cmd_update: Callable, instance_of: Callable, run_config:
     from evaluation.method_comparison import METHODS
     from pipelines.benchmark_report import report_benchmark
     from pipelines.definitions import defs
+    from pipelines.run_guard import run_tags
 
     methods = args.methods.split(",") if args.methods else None
     unknown = sorted(set(methods or ()) - set(METHODS))
@@ -44,6 +45,9 @@ def run_benchmark(args, cmd_update: Callable, instance_of: Callable, run_config:
         print("humancal: the update failed; no benchmark fits", file=sys.stderr)
         return status
     instance = instance_of()
+    from pipelines.quiet_warp import init_warp_quietly
+
+    init_warp_quietly()  # the fits build the body model: no CUDA-driver warning from warp on a CPU-only machine
     ops = dict(run_config)
     if methods:
         ops = {**ops, "ops": {"method_tables": {"config": {"methods": methods}}}}
@@ -51,13 +55,13 @@ def run_benchmark(args, cmd_update: Callable, instance_of: Callable, run_config:
         print(f"method_tables[{partition}]: fitting {', '.join(methods or ['every regime'])} ...", flush=True)
         result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
                                 selection=dg.AssetSelection.assets("method_tables"), partition_key=partition,
-                                instance=instance, run_config=ops, raise_on_error=False)
+                                instance=instance, run_config=ops, tags=run_tags(), raise_on_error=False)
         if not result.success:
             print(f"humancal: method_tables[{partition}] failed (see the log above)", file=sys.stderr)
             return 1
     result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
                             selection=dg.AssetSelection.assets("benchmark_table", "stage_timings"),
-                            instance=instance, run_config=run_config, raise_on_error=False)
+                            instance=instance, run_config=run_config, tags=run_tags(), raise_on_error=False)
     if not result.success:
         print("humancal: benchmark_table / stage_timings failed (see the log above)", file=sys.stderr)
         return 1

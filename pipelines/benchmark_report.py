@@ -94,6 +94,9 @@ def report_benchmark(args, instance: Callable[[], object]) -> int:
 
     table, source = benchmark_for_report(artifacts_root(), args.partition)
     print(f"humancal: {source}", file=sys.stderr)
+    if source.startswith("benchmark_table as stored"):
+        for line in left_out_lines(instance()):
+            print(f"humancal: {line}", file=sys.stderr)
     if args.format == "csv":
         sys.stdout.write(table.to_csv(index=False))
         return 0
@@ -101,6 +104,18 @@ def report_benchmark(args, instance: Callable[[], object]) -> int:
     sys.stdout.write("\n## Per-stage seconds (latest materialization of each asset, from the run history)\n\n")
     sys.stdout.write(stage_timings_markdown(_timings(instance(), args.partition), paper_results()))
     return 0
+
+
+def left_out_lines(instance) -> list[str]:
+    """The partitions the stored ``benchmark_table`` was computed without (failed, or held back by a failed blocking
+    check), from its latest materialization's metadata."""
+    import dagster as dg
+
+    event = instance.get_latest_materialization_event(dg.AssetKey("benchmark_table"))
+    left_out = event.asset_materialization.metadata.get("left_out") if event and event.asset_materialization else None
+    text = getattr(left_out, "value", None) or getattr(left_out, "md_str", None) or ""
+    parts = [line.removeprefix("- ") for line in str(text).splitlines() if line.startswith("- ")]
+    return [f"benchmark_table left out {part}" for part in parts]
 
 
 def _timings(instance, partitions: list[str] | None) -> pd.DataFrame:

@@ -47,6 +47,7 @@ def export_stored_motions(args, load_table: Callable[[], pd.DataFrame]) -> int:
     from humancal.body import BodyModel
     from humancal.fitting import FittedMotions
     from humancal.formats.motions import MOTION_FORMATS, export_motions, mesh_selection, person_spans
+    from pipelines.quiet_warp import init_warp_quietly
 
     if args.format not in MOTION_FORMATS:
         raise SystemExit(f"humancal: motions export supports --format {', '.join(MOTION_FORMATS)}; got {args.format}")
@@ -58,6 +59,7 @@ def export_stored_motions(args, load_table: Callable[[], pd.DataFrame]) -> int:
     motions = FittedMotions.from_table(table, fps)
     print(f"{motions.num_people} people, frames {motions.frames[0]}-{motions.frames[-1]} at {fps:g} fps ({source})")
     torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
+    init_warp_quietly()  # anny's skinning initialises warp: no CUDA-driver warning on a CPU-only machine
     body = BodyModel()
     progress = None
     if args.format == "obj":

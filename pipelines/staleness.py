@@ -36,6 +36,8 @@ from dagster._core.definitions.data_version import (
 )
 from dagster._time import get_current_datetime
 
+from resources.io_managers import STORED_FILE_KEY
+
 __all__ = ["Freshness", "Recorded", "Status", "StalenessView", "io_manager_key"]
 
 
@@ -67,10 +69,15 @@ class Recorded:
         data_version: its data version.
         user_provided: the asset computed that version itself (humancal's content hashes), rather than Dagster
             deriving one from code version and inputs.
+        file_signature: size and modification time of the stored file right after it was written
+            (``resources.io_managers.STORED_FILE_KEY``; ``None`` when not recorded).
+        run_id: the run that materialized it.
     """
 
     data_version: str
     user_provided: bool
+    file_signature: str | None = None
+    run_id: str | None = None
 
 
 _FRESHNESS = {StaleStatus.MISSING: Freshness.MISSING, StaleStatus.STALE: Freshness.STALE, StaleStatus.FRESH: Freshness.FRESH}
@@ -112,11 +119,14 @@ class StalenessView:
         ).records
         if not records:
             return None
-        tags = records[0].asset_materialization.tags or {}
+        materialization = records[0].asset_materialization
+        tags = materialization.tags or {}
         version = tags.get(DATA_VERSION_TAG)
         if version is None:
             return None
-        return Recorded(version, tags.get(DATA_VERSION_IS_USER_PROVIDED_TAG) == "true")
+        signature = (materialization.metadata or {}).get(STORED_FILE_KEY)
+        return Recorded(version, tags.get(DATA_VERSION_IS_USER_PROVIDED_TAG) == "true",
+                        getattr(signature, "value", None), records[0].run_id)
 
 
 def _describe(cause) -> str:

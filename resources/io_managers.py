@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 import uuid
 from typing import Any, Literal
 
@@ -31,6 +32,10 @@ from humancal.tables import SCHEMAS, check_values, table_to_pandas, to_arrow
 
 TABLE_METADATA_KEY = "humancal/table"
 """Asset metadata naming the canonical table an asset holds (validated on every write)."""
+
+STORED_FILE_KEY = "humancal/stored_file"
+"""Materialization metadata: the stored file's size and modification time (:func:`file_signature`), recorded beside
+the data version so that ``humancal update`` rehashes an artifact only when the file changed since."""
 
 
 class ArtifactError(RuntimeError):
@@ -107,6 +112,19 @@ def stored_content_version(path: str | UPath, kind: ArtifactKind, table: str | N
     raise ValueError(f"stored_content_version: kind must be 'table' or 'checkpoint', got {kind!r}")
 
 
+def file_signature(path: str | UPath) -> str | None:
+    """``"<size>:<mtime_ns>"`` of a local file (``None`` for a remote one or a missing file): what
+    :data:`STORED_FILE_KEY` records. A file rewritten since has another signature, unless someone forges both."""
+    path = UPath(path)
+    if path.protocol not in ("", "file", "local"):
+        return None
+    try:
+        stat = os.stat(path.path)
+    except OSError:
+        return None
+    return f"{stat.st_size}:{stat.st_mtime_ns}"
+
+
 def _first_line(err: BaseException) -> str:
     return str(err).splitlines()[0] if str(err) else type(err).__name__
 
@@ -146,6 +164,12 @@ def _make_dir(path: UPath) -> None:
         ) from None
 
 
+def _record_signature(context: dg.OutputContext, path: UPath) -> None:
+    signature = file_signature(path)
+    if signature is not None:
+        context.add_output_metadata({STORED_FILE_KEY: dg.MetadataValue.text(signature)})
+
+
 class _AtomicUPathIOManager(UPathIOManager):
     def make_directory(self, path: UPath) -> None:
         _make_dir(path)
@@ -168,6 +192,7 @@ class ParquetTableIOManager(_AtomicUPathIOManager):
         buffer = io.BytesIO()
         pq.write_table(table, buffer)
         _atomic_write(path, buffer.getvalue())
+        _record_signature(context, path)
 
     def load_from_path(self, context: dg.InputContext, path: UPath) -> pd.DataFrame:
         try:
@@ -200,6 +225,7 @@ class CheckpointIOManager(_AtomicUPathIOManager):
         buffer = io.BytesIO()
         torch.save(obj, buffer)
         _atomic_write(path, buffer.getvalue())
+        _record_signature(context, path)
 
     def load_from_path(self, context: dg.InputContext, path: UPath) -> dict:
         try:

@@ -58,3 +58,23 @@ def test_benchmark_table_reads_the_stored_partitions_and_skips_the_others(tmp_pa
     assert timings.loc[timings["asset"] == "total", "seconds"].isna().all()
     recorded = events["stage_timings"].tags["dagster/data_version"]
     assert stored_content_version(partition_path(storage, "stage_timings", None), "table", "stage_timings") == recorded
+
+
+def test_benchmark_table_leaves_out_what_the_update_says_and_says_why(tmp_path):
+    from pipelines.benchmark_report import left_out_lines
+
+    storage = str(tmp_path / "artifacts")
+    defs = build_definitions(storage, datasets=DatasetsResource(data_dir=str(tmp_path / "no_data")))
+    instance = dg.DagsterInstance.ephemeral()
+    instance.add_dynamic_partitions(SEQUENCES.name, [STORED, MISSING])
+    _store(storage, "metric_tables", STORED, "init", {"focal_error_pct": 2.5}, instance)
+    _store(storage, "metric_tables", MISSING, "init", {"focal_error_pct": 99.0}, instance)  # stored, but out of date
+    reason = "extrinsics[synthetic__tiny] failed its blocking check rig_geometry"
+    result = dg.materialize(list(defs.assets), resources=defs.resources, instance=instance,
+                            selection=dg.AssetSelection.assets("benchmark_table"),
+                            run_config={"ops": {"benchmark_table": {"config": {"left_out": {MISSING: reason}}}}})
+    stored = pd.read_parquet(str(partition_path(storage, "benchmark_table", None)))
+    assert set(stored.loc[stored["source"] == "humancal", "sequence"]) == {"demo"}
+    [event] = result.get_asset_materialization_events()
+    assert event.materialization.metadata["left_out"].value == f"- {MISSING}: {reason}"
+    assert left_out_lines(instance) == [f"benchmark_table left out {MISSING}: {reason}"]

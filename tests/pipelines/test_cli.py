@@ -136,16 +136,17 @@ def test_export_cameras_roundtrips_through_a_tool_format(tmp_path, monkeypatch, 
 
     monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
     K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
-    stored = {"extrinsics": [0.1, 0.2, 3.0], "gt_cameras": [0.0, 0.0, 4.0]}  # estimated and true cameras differ
+    stored = {"final_cameras": [0.1, 0.2, 3.0], "gt_cameras": [0.0, 0.0, 4.0]}  # estimated and true cameras differ
     for asset, t in stored.items():
         folder = tmp_path / "artifacts" / asset
         folder.mkdir(parents=True)
         cameras_to_table([Camera(K, np.eye(3), np.array(t), 1280, 720)], "s").to_parquet(folder / "d__s.parquet")
     out = tmp_path / "calib.toml"
     assert main(["export", "cameras", "--partition", "d__s", "--format", "pose2sim", "--out", str(out)]) == 0
-    assert "wrote 1 estimated cameras (asset extrinsics, format pose2sim)" in capsys.readouterr().out
+    assert "wrote 1 final cameras (asset final_cameras; source not recorded, format pose2sim)" in \
+        capsys.readouterr().out
     back = read_cameras(out, format="pose2sim")
-    assert np.allclose(back[0].K, K) and np.allclose(back[0].t_cam_from_world_m, stored["extrinsics"])
+    assert np.allclose(back[0].K, K) and np.allclose(back[0].t_cam_from_world_m, stored["final_cameras"])
     for flags in (["--ground-truth"], ["--cameras-asset", "gt_cameras"]):
         assert main(["export", "cameras", "--partition", "d__s", "--format", "pose2sim", "--out", str(out),
                      "--overwrite", *flags]) == 0

@@ -43,7 +43,10 @@ def test_export_motions_bvh_and_obj(tmp_path, monkeypatch, capsys, body_model):
     assert "2 people, frames 10-15 at 30 fps (synthetic preset 'tiny')" in printed
     assert f"person 4: frames 12-15 -> {out / 'person_4.bvh'}" in printed
     assert parse_bvh(out / "person_4.bvh").values.shape[0] == 4
-    assert main(["export", "motions", "--partition", PARTITION, "--format", "bvh", "--out", str(out), "--fps", "50"]) == 0
+    with pytest.raises(SystemExit, match=f"{out} is a folder that is not empty; pass --overwrite"):
+        main(["export", "motions", "--partition", PARTITION, "--format", "bvh", "--out", str(out), "--fps", "50"])
+    assert main(["export", "motions", "--partition", PARTITION, "--format", "bvh", "--out", str(out), "--fps", "50",
+                 "--overwrite"]) == 0
     assert "at 50 fps (--fps)" in capsys.readouterr().out
     assert parse_bvh(out / "person_4.bvh").fps == pytest.approx(50.0)
     meshes = tmp_path / "obj"

@@ -54,6 +54,17 @@ def test_roundtrip_layout_and_metadata(tmp_path):
     assert not [p for p in tmp_path.iterdir() if ".tmp-" in p.name]
 
 
+def test_the_stored_files_size_and_time_are_recorded_beside_the_output(tmp_path):
+    from resources.io_managers import STORED_FILE_KEY, file_signature
+
+    result = dg.materialize(_assets(), resources={"io_manager": ParquetIOManagerFactory(base_path=str(tmp_path))})
+    meta = result.asset_materializations_for_node("dets")[0].metadata
+    assert meta[STORED_FILE_KEY].value == file_signature(tmp_path / "dets.parquet") is not None
+    (tmp_path / "dets.parquet").write_bytes((tmp_path / "dets.parquet").read_bytes()[:-1])
+    assert file_signature(tmp_path / "dets.parquet") != meta[STORED_FILE_KEY].value
+    assert file_signature(tmp_path / "missing.parquet") is None and file_signature("memory://x/y.parquet") is None
+
+
 def test_schema_violation_fails_and_writes_nothing(tmp_path):
     with pytest.raises(Exception) as excinfo:
         dg.materialize(_assets(x=float("nan")), resources={"io_manager": ParquetIOManagerFactory(base_path=str(tmp_path))})

@@ -1,0 +1,139 @@
+"""``humancal export detections|cameras|motions``: stored artifacts of a partition in other tools' formats.
+
+One rule for every export: it refuses to write where something is already there (``--out`` names an existing
+file, or a folder that is not empty) and says so, naming the path; ``--overwrite`` replaces what the export writes
+there (other files in the folder stay). An ``--out`` that cannot be written (a read-only folder) is one line naming
+the path, checked before anything is computed.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+__all__ = ["CAMERA_ASSETS", "check_out", "cmd_export", "stored_table"]
+
+CAMERA_ASSETS = {"final_cameras": "final", "extrinsics": "calibrated", "refined_cameras": "refined",
+                 "gt_cameras": "ground-truth"}
+"""Stored camera tables ``export cameras`` knows by what they are; ``final_cameras`` (the run's last word: the
+refined cameras when the refinement passed its check, else the calibrated ones) is the default."""
+
+
+def stored_table(asset: str, partition: str):
+    """The stored table of an asset partition (exits with the command to run when it is not stored)."""
+    import pandas as pd
+
+    from pipelines.definitions import artifacts_root
+    from resources.io_managers import partition_path
+
+    path = partition_path(artifacts_root(), asset, partition)
+    if not path.exists():
+        raise SystemExit(f"humancal: {asset} of {partition} is not stored ({path}); run `humancal update --partition {partition}`")
+    return pd.read_parquet(str(path))
+
+
+def _writable_ancestor(path: Path) -> Path:
+    """The nearest existing folder at or above ``path`` (where the export creates what is missing)."""
+    folder = path if path.is_dir() else path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    return folder
+
+
+def check_out(out: str | Path, overwrite: bool) -> Path:
+    """Check ``--out`` before anything is computed: not an existing file or non-empty folder unless
+    ``overwrite``, and writable.
+
+    Raises:
+        SystemExit: the path exists (without ``--overwrite``), or it cannot be written; one line naming it.
+    """
+    out = Path(out).expanduser()
+    if out.exists() and not overwrite:
+        if out.is_file() or any(out.iterdir()):
+            what = "exists" if out.is_file() else "is a folder that is not empty"
+            raise SystemExit(f"humancal: {out} {what}; pass --overwrite to replace what the export writes there, "
+                             "or choose another --out")
+    folder = _writable_ancestor(out)
+    target = out if out.exists() else folder
+    if not os.access(target, os.W_OK) or not os.access(folder, os.W_OK | os.X_OK):
+        raise SystemExit(f"humancal: cannot write {target}: permission denied (or a read-only file system); "
+                         "choose another --out or make it writable")
+    return out
+
+
+def cmd_export(args) -> int:
+    """Hand detections, cameras or motions of a partition to other tools (OpenPose JSON; Pose2Sim, anipose,
+    EasyMocap, COLMAP, Shelf or humancal camera files; BVH, glTF, npz, OBJ)."""
+    try:
+        return _export(args)
+    except PermissionError as err:  # checked up front; a file inside the folder can still refuse
+        raise SystemExit(f"humancal: cannot write {err.filename or args.out}: {err.strerror}; choose another --out "
+                         "or make it writable") from None
+    except OSError as err:
+        if err.filename is None:
+            raise
+        raise SystemExit(f"humancal: cannot write {err.filename}: {err.strerror}") from None
+
+
+def _export(args) -> int:
+    if args.what == "motions":
+        from pipelines.format_names import MOTION_FORMATS
+        from pipelines.motions_export import export_stored_motions
+
+        if args.format in MOTION_FORMATS:  # an unknown format is refused with the known ones, below
+            check_out(args.out, args.overwrite)
+        return export_stored_motions(args, lambda: stored_table("fitted_motions", args.partition))
+    if args.what == "detections":
+        from humancal.formats import write_openpose
+
+        if args.format != "openpose":
+            raise SystemExit("humancal: detections export supports --format openpose")
+        check_out(args.out, args.overwrite)
+        folders = write_openpose(stored_table("raw_detections", args.partition), args.out, overwrite=args.overwrite)
+        print(f"wrote OpenPose JSON for {len(folders)} views under {args.out}")
+        return 0
+    from humancal.camera import cameras_from_table
+    from humancal.formats import write_cameras
+
+    asset = _cameras_asset(args)
+    table = stored_table(asset, args.partition)
+    check_out(args.out, args.overwrite)
+    cameras = cameras_from_table(table)
+    names = _view_names(args.partition, len(cameras)) if args.format != "shelf" else None  # shelf: numbers only
+    path = write_cameras(cameras, args.out, args.format, names=names)
+    what = CAMERA_ASSETS.get(asset, "stored")
+    source = f"; {final_source(args.partition)}" if asset == "final_cameras" else ""
+    print(f"wrote {len(cameras)} {what} cameras (asset {asset}{source}, format {args.format}) to {path}")
+    return 0
+
+
+def _view_names(partition: str, count: int) -> list[str] | None:
+    """The partition's view names (folder names of a capture), when stored, distinct and as many as the cameras."""
+    try:
+        views = stored_table("views", partition).sort_values("view")
+    except SystemExit:  # not stored (cameras written by hand): the default names
+        return None
+    names = views["name"].astype(str).tolist() if "name" in views.columns else []
+    return names if len(names) == count and len(set(names)) == count else None
+
+
+def final_source(partition: str) -> str:
+    """Which cameras ``final_cameras`` of a partition holds, and why (from its latest materialization)."""
+    import dagster as dg
+
+    from pipelines.cli import _instance
+
+    records = _instance().fetch_materializations(dg.AssetRecordsFilter(
+        asset_key=dg.AssetKey("final_cameras"), asset_partitions=[partition]), limit=1).records
+    meta = records[0].asset_materialization.metadata if records else {}
+    source, reason = meta.get("source"), meta.get("reason")
+    return f"the {source.value}: {reason.value}" if source and reason else "source not recorded"
+
+
+def _cameras_asset(args) -> str:
+    """The estimated cameras unless the ground truth (or another stored cameras table) is asked for by name."""
+    if args.ground_truth and args.cameras_asset not in (None, "gt_cameras"):
+        raise SystemExit(f"humancal: --ground-truth and --cameras-asset {args.cameras_asset} contradict each other")
+    if args.ground_truth:
+        return "gt_cameras"
+    return args.cameras_asset or "final_cameras"
