@@ -16,6 +16,8 @@ _OUTPUTS = {
     "raw_detections": ("detections", "detections", "2D detections in the canonical 23 keypoints, no identities."),
     "views": ("views", "views", "Image size of every view."),
     "gt_cameras": ("cameras", "gt_cameras", "Ground-truth cameras (evaluation only)."),
+    "known_cameras": ("cameras", "known_cameras", "Cameras the capture brings for the method to use (the known views "
+                                                  "only; empty: every camera is calibrated from the people)."),
     "gt_poses3d": ("poses3d", "gt_poses3d", "Ground-truth 3D joints in the world frame (evaluation only)."),
     "gt_associations": ("associations", "gt_associations", "Ground-truth person id of each detection (evaluation only)."),
     "gt_people": ("people", "gt_people", "Ground-truth body shape of each person (empty where unknown)."),

@@ -7,8 +7,9 @@ in pixels; distortion as OpenCV's (k1, k2, p1, p2, k3). World: metres, right-han
 
 from __future__ import annotations
 
+
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -287,6 +288,27 @@ class CameraRig:
 def cameras_to_table(cameras: list[Camera], sequence: str) -> pd.DataFrame:
     """The canonical ``cameras`` table (one row per view, views numbered in list order)."""
     return CameraRig.from_cameras(cameras).to_table(sequence)
+
+
+def pinhole(camera: Camera) -> Camera:
+    """The camera without its lens distortion (same intrinsics and pose)."""
+    return Camera(camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m, camera.width_px, camera.height_px)
+
+
+def with_known_distortion(rig: CameraRig, known: dict[int, Camera]) -> CameraRig:
+    """The rig with the lens distortion of the known cameras put back in their views."""
+    distortion = rig.distortion.copy()
+    for v, camera in known.items():
+        distortion[v] = camera.distortion
+    return replace(rig, distortion=distortion)
+
+
+def cameras_by_view(table: pd.DataFrame) -> dict[int, Camera]:
+    """The cameras of a canonical ``cameras`` table that holds some views only (e.g. a capture's known cameras), by
+    view."""
+    views = [int(v) for v in sorted(table["view"])]
+    renumbered = table.assign(view=table["view"].map({v: i for i, v in enumerate(views)}))
+    return dict(zip(views, cameras_from_table(renumbered)))
 
 
 def cameras_from_table(table: pd.DataFrame) -> list[Camera]:

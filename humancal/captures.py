@@ -8,20 +8,25 @@ file)::
     views: [cam1/, cam2/, cam3/]      # one folder (openpose) or file (coco) per view, in view order
     image_size: [1920, 1080]          # [width, height] for every view, or one pair per view
     skeleton: body25                  # optional where the array length tells it (needed for 25 points)
-    cameras: {path: calib.toml, format: pose2sim}   # optional known cameras: evaluation only
+    cameras: {path: calib.toml, format: pose2sim}   # optional known cameras, used instead of a calibration
+                                      # (views: [cam2]: the file's cameras are those views'; refine: true)
+    reference_cameras: {path: truth.toml}           # optional true cameras: evaluation only
+    drop_views: [cam3]                # optional: views left out
     fps: 30                           # optional
 
-Relative paths are relative to the datasets file's folder. Reading a capture drops (and counts) joints outside the
-image (negative or beyond the width/height: trackers extrapolate them, no detector saw them) and placeholder
-person entries without keypoints; every other problem is a :class:`~humancal.formats.FormatError` or
-``ValueError`` naming the file and the field. Known cameras never reach the method: they become the
-``gt_cameras`` table, used for evaluation and the known-camera reference rows only.
+Relative paths are relative to the datasets file's folder. Reading a capture checks what was declared against the
+detections (:func:`load_capture`: image sizes, a 25-point skeleton, the views), then drops (and counts) joints
+outside the image (negative or beyond the width/height: trackers extrapolate a few, no detector saw them) and
+placeholder person entries without keypoints; every problem is a :class:`~humancal.formats.FormatError` or
+``ValueError`` naming the file and the field, or the view and the option. Known cameras become the
+``known_cameras`` table (the method uses them); reference cameras the ``gt_cameras`` table (evaluation only).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,79 +34,41 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from humancal.camera import cameras_to_table
-from humancal.formats import CAMERA_FORMATS, DETECTION_FORMATS, FormatError, read_cameras, read_detections
-from humancal.formats.detections import PLACEHOLDERS_ATTR
+from humancal.capture_cameras import read_capture_cameras
+from humancal.capture_options import (
+    camera_file_option,
+    is_size,
+    parse_image_size,
+    parse_principal_point,
+    principal_points_option,
+)
+from humancal.formats import (
+    CAMERA_READ_FORMATS,
+    DETECTION_FORMATS,
+    FormatError,
+    read_detections,
+)
+from humancal.formats.detections import COCO_SKELETONS, OPENPOSE_SKELETONS, PLACEHOLDERS_ATTR
+from humancal.formats.detections.checks import (
+    check_image_sizes,
+    check_view_paths,
+    check_views,
+    off_image,
+)
+from humancal.formats.detections.skeleton_fit import check_skeleton_fit
 from humancal.formats.skeletons import SKELETONS
 from humancal.tables import empty_table, validate_table
 
-__all__ = ["CAPTURE_FILE", "CaptureConfig", "CaptureSummary", "Capture", "load_capture", "parse_image_size",
-           "parse_principal_point", "principal_points_option", "read_capture_folder"]
+__all__ = ["OPTION_NAMES", "CaptureConfig", "CaptureSummary", "Capture", "load_capture",
+           "parse_image_size", "parse_principal_point", "principal_points_option"]
 
 log = logging.getLogger(__name__)
 
-PIXEL_EDGE_PX = 0.5
-"""Pixel centres run from 0 to width - 1: a joint beyond half a pixel outside that range is off the image."""
-
-
-def parse_image_size(text: str, where: str = "image size") -> tuple[int, int]:
-    """``"1920x1080"`` as (width_px, height_px).
-
-    Raises:
-        ValueError: not two positive integers joined by ``x`` (the message names ``where``).
-    """
-    parts = str(text).lower().split("x")
-    if len(parts) == 2 and all(p.strip().isdigit() for p in parts):
-        w, h = int(parts[0]), int(parts[1])
-        if w > 0 and h > 0:
-            return w, h
-    raise ValueError(f"{where}: expected WIDTHxHEIGHT in pixels (e.g. 1920x1080), got {text!r}")
-
-
-def parse_principal_point(text: str, where: str = "principal point") -> tuple[float, float]:
-    """``"963.5,541.2"`` as (cx_px, cy_px).
-
-    Raises:
-        ValueError: not two finite numbers joined by ``,`` (the message names ``where``).
-    """
-    parts = str(text).split(",")
-    try:
-        cx, cy = (float(p) for p in parts) if len(parts) == 2 else (np.nan, np.nan)
-    except ValueError:
-        cx = cy = np.nan
-    if np.isfinite(cx) and np.isfinite(cy):
-        return cx, cy
-    raise ValueError(f"{where}: expected CX,CY in pixels (e.g. 963.5,541.2), got {text!r}")
-
-
-def principal_points_option(value: object, image_sizes_px: Sequence[tuple[int, int]],
-                            where: str = "principal_point") -> tuple[tuple[float, float], ...]:
-    """Known principal points from an option: ``[cx, cy]`` for every view or one ``[cx, cy]`` per view, pixels, each
-    inside its image (``0 <= cx <= width``, ``0 <= cy <= height``).
-
-    Returns:
-        (V,) (cx_px, cy_px), V = ``len(image_sizes_px)``.
-
-    Raises:
-        ValueError: another form, a count other than 1 or V, or a point outside its image (the message names
-            ``where`` and the view).
-    """
-    def is_point(p: object) -> bool:
-        return (isinstance(p, (list, tuple)) and len(p) == 2
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in p))
-
-    V = len(image_sizes_px)
-    if is_point(value):
-        points = [tuple(float(x) for x in value)] * V  # type: ignore[union-attr]
-    elif isinstance(value, (list, tuple)) and len(value) == V and all(is_point(p) for p in value):
-        points = [tuple(float(x) for x in p) for p in value]  # type: ignore[union-attr]
-    else:
-        raise ValueError(f"{where}: expected [cx, cy] in pixels for every view or one [cx, cy] per view ({V}), "
-                         f"got {value!r}")
-    for v, ((cx, cy), (w, h)) in enumerate(zip(points, image_sizes_px)):
-        if not (0.0 <= cx <= w and 0.0 <= cy <= h):
-            raise ValueError(f"{where}: view {v}'s ({cx:g}, {cy:g}) is outside its {w}x{h} image")
-    return tuple(points)  # type: ignore[return-value]
+OPTION_NAMES: dict[str, str] = {"views": "views", "image_size": "image_size", "skeleton": "skeleton",
+                                "cameras_format": "cameras.format", "known_views": "cameras.views",
+                                "reference_cameras_format": "reference_cameras.format", "drop_views": "drop_views"}
+"""How messages name the capture options by default: as in a datasets file or ``capture.yaml``. The command line
+passes its flags instead (``load_capture(..., option_names=...)``)."""
 
 
 @dataclass(frozen=True)
@@ -113,8 +80,16 @@ class CaptureConfig:
         views: (V,) absolute folder or file paths, in view order.
         image_sizes_px: (V,) (width_px, height_px) per view.
         skeleton: the detector's skeleton name (``None``: told from the array length where only one fits).
-        cameras: known cameras file (evaluation only), or ``None``.
-        cameras_format: its format (one of ``humancal.formats.CAMERA_FORMATS``; ``None``: from the file name).
+        cameras: known cameras file, or ``None``: the capture's cameras, used by the method instead of a
+            calibration from the people (``docs/capture.md``, "Known cameras").
+        cameras_format: its format (one of ``humancal.formats.CAMERA_READ_FORMATS``; ``None``: from the file name).
+        known_views: the names of the views whose cameras ``cameras`` holds, in the file's order (``None``: every
+            view, in view order); the other views are calibrated around them.
+        refine_cameras: whether the body fit may refine the known cameras (default: they are held).
+        reference_cameras: the true cameras of the views, one per view (evaluation only: the metric table's
+            camera rows), or ``None``.
+        reference_cameras_format: its format (``None``: from the file name).
+        drop_views: names of views left out of the capture (e.g. one that cannot be calibrated).
         fps: frames per second, when known.
         principal_points_px: (V,) (cx_px, cy_px) per view when known (used by the calibration, which otherwise
             puts the principal point at the image centre), or ``None``.
@@ -128,6 +103,11 @@ class CaptureConfig:
     cameras_format: str | None = None
     fps: float | None = None
     principal_points_px: tuple[tuple[float, float], ...] | None = None
+    known_views: tuple[str, ...] | None = None
+    refine_cameras: bool = False
+    reference_cameras: Path | None = None
+    reference_cameras_format: str | None = None
+    drop_views: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.format not in DETECTION_FORMATS:
@@ -141,8 +121,12 @@ class CaptureConfig:
             )
         if self.skeleton is not None and self.skeleton not in SKELETONS:
             raise ValueError(f"skeleton: expected one of {sorted(SKELETONS)}, got {self.skeleton!r}")
-        if self.cameras_format is not None and self.cameras_format not in CAMERA_FORMATS:
-            raise ValueError(f"cameras.format: expected one of {list(CAMERA_FORMATS)}, got {self.cameras_format!r}")
+        for name, fmt in (("cameras.format", self.cameras_format),
+                          ("reference_cameras.format", self.reference_cameras_format)):
+            if fmt is not None and fmt not in CAMERA_READ_FORMATS:
+                raise ValueError(f"{name}: expected one of {list(CAMERA_READ_FORMATS)}, got {fmt!r}")
+        if self.cameras is None and (self.known_views is not None or self.refine_cameras):
+            raise ValueError("cameras.views and cameras.refine need known cameras (cameras.path)")
         if self.fps is not None and not self.fps > 0:
             raise ValueError(f"fps: expected a positive number, got {self.fps!r}")
         if self.principal_points_px is not None:
@@ -161,7 +145,8 @@ class CaptureConfig:
             p = Path(value).expanduser()
             return p if p.is_absolute() or base_dir is None else (base_dir / p)
 
-        known = ("format", "views", "image_size", "skeleton", "cameras", "fps", "principal_point")
+        known = ("format", "views", "image_size", "skeleton", "cameras", "reference_cameras", "drop_views", "fps",
+                 "principal_point")
         unknown = sorted(set(options) - set(known))
         if unknown:
             raise ValueError(f"unknown option(s) {unknown}; expected {', '.join(known)}")
@@ -169,25 +154,33 @@ class CaptureConfig:
         if not isinstance(views, list) or not views:
             raise ValueError(f"views: expected a list of paths (one per view), got {views!r}")
         size = options.get("image_size")
-        if _is_size(size):
+        if is_size(size):
             sizes = [tuple(size)] * len(views)
-        elif isinstance(size, list) and size and all(_is_size(s) for s in size):
+        elif isinstance(size, list) and size and all(is_size(s) for s in size):
             sizes = [tuple(s) for s in size]
         else:
             raise ValueError(f"image_size: expected [width, height] or one [width, height] per view, got {size!r}")
-        cameras = options.get("cameras")
-        cam_path, cam_format = None, None
-        if cameras is not None:
-            if not isinstance(cameras, dict) or "path" not in cameras:
-                raise ValueError(f"cameras: expected {{path: FILE, format: FORMAT}}, got {cameras!r}")
-            cam_path, cam_format = path(cameras["path"], "cameras.path"), cameras.get("format")
+        known = camera_file_option(options.get("cameras"), "cameras", path, ("views", "refine"))
+        reference = camera_file_option(options.get("reference_cameras"), "reference_cameras", path, ())
+        drop = options.get("drop_views", [])
+        if not (isinstance(drop, list) and all(isinstance(n, str) for n in drop)):
+            raise ValueError(f"drop_views: expected a list of view names, got {drop!r}")
+        views_known = known.get("views")
+        if views_known is not None and not (isinstance(views_known, list) and all(isinstance(n, str)
+                                                                                   for n in views_known)):
+            raise ValueError(f"cameras.views: expected a list of view names, got {views_known!r}")
         return cls(
             format=options.get("format", "openpose"),
             views=tuple(path(v, f"views[{i}]") for i, v in enumerate(views)),
             image_sizes_px=tuple(sizes),  # type: ignore[arg-type]
             skeleton=options.get("skeleton"),
-            cameras=cam_path,
-            cameras_format=cam_format,
+            cameras=known.get("path"),
+            cameras_format=known.get("format"),
+            known_views=tuple(views_known) if views_known is not None else None,
+            refine_cameras=bool(known.get("refine", False)),
+            reference_cameras=reference.get("path"),
+            reference_cameras_format=reference.get("format"),
+            drop_views=tuple(drop),
             fps=options.get("fps"),
             principal_points_px=(principal_points_option(options["principal_point"], sizes)  # type: ignore[arg-type]
                                  if options.get("principal_point") is not None else None),
@@ -207,6 +200,16 @@ class CaptureConfig:
             options["cameras"] = {"path": str(self.cameras)}
             if self.cameras_format is not None:
                 options["cameras"]["format"] = self.cameras_format
+            if self.known_views is not None:
+                options["cameras"]["views"] = list(self.known_views)
+            if self.refine_cameras:
+                options["cameras"]["refine"] = True
+        if self.reference_cameras is not None:
+            options["reference_cameras"] = {"path": str(self.reference_cameras)}
+            if self.reference_cameras_format is not None:
+                options["reference_cameras"]["format"] = self.reference_cameras_format
+        if self.drop_views:
+            options["drop_views"] = list(self.drop_views)
         if self.fps is not None:
             options["fps"] = float(self.fps)
         if self.principal_points_px is not None:
@@ -214,11 +217,6 @@ class CaptureConfig:
             options["principal_point"] = (list(points.pop()) if len(points) == 1
                                           else [list(p) for p in self.principal_points_px])
         return options
-
-
-def _is_size(value: object) -> bool:
-    return (isinstance(value, (list, tuple)) and len(value) == 2
-            and all(isinstance(x, int) and not isinstance(x, bool) and x > 0 for x in value))
 
 
 @dataclass(frozen=True)
@@ -232,8 +230,10 @@ class CaptureSummary:
         placeholders: (V,) person entries without keypoints, skipped.
         off_image_joints: (V,) joints outside the image, dropped.
         skeleton: the detector skeleton (named, or told from the array length).
-        known_cameras: whether known cameras come with it (evaluation only).
+        known_cameras: the views whose cameras are known (used by the method).
+        reference_cameras: whether reference cameras come with it (evaluation only).
         total_frames: frames with a detection in any view.
+        warnings: input that is probably wrong but usable, one line each (checks of ``load_capture``).
     """
 
     names: tuple[str, ...]
@@ -242,8 +242,10 @@ class CaptureSummary:
     placeholders: tuple[int, ...]
     off_image_joints: tuple[int, ...]
     skeleton: str
-    known_cameras: bool
+    known_cameras: tuple[str, ...] = ()
+    reference_cameras: bool = False
     total_frames: int = 0
+    warnings: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
         """The summary in words, one line per view and a last line for the capture."""
@@ -254,10 +256,17 @@ class CaptureSummary:
                 zip(self.names, self.frames, self.detections, self.placeholders, self.off_image_joints)
             )
         ]
-        cams = "known cameras given (evaluation only)" if self.known_cameras else "no known cameras"
+        if len(self.known_cameras) == len(self.names):
+            cams = "every camera known (used instead of a calibration)"
+        elif self.known_cameras:
+            cams = f"cameras of {', '.join(self.known_cameras)} known (the others calibrated around them)"
+        else:
+            cams = "cameras calibrated from the people"
+        if self.reference_cameras:
+            cams += "; reference cameras given (evaluation only)"
         out.append(f"  {len(self.names)} views, {self.total_frames} frames, {sum(self.detections)} detections, "
                    f"skeleton {self.skeleton}, {cams}")
-        return out
+        return out + [f"  warning: {w}" for w in self.warnings]
 
 
 @dataclass(frozen=True)
@@ -267,124 +276,128 @@ class Capture:
     Attributes:
         detections: canonical ``detections`` table (on-image joints only).
         views: canonical ``views`` table.
-        gt_cameras: canonical ``cameras`` table of the known cameras (empty when none).
+        gt_cameras: canonical ``cameras`` table of the reference cameras (empty when none).
         summary: counts per view.
+        known_cameras: canonical ``cameras`` table of the known cameras, the known views only (empty when none).
     """
 
     detections: pd.DataFrame
     views: pd.DataFrame
     gt_cameras: pd.DataFrame
     summary: CaptureSummary
+    known_cameras: pd.DataFrame
 
 
-def load_capture(config: CaptureConfig, sequence: str) -> Capture:
+def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[str, str] | None = None) -> Capture:
     """Read, check and summarise a capture.
+
+    Checks, before anything is returned (``humancal.formats.detections.checks`` and ``.skeleton_fit`` state the
+    rules): two views or more, each path once; each view's image size against where its joints lie; a 25-point
+    skeleton against the people's anatomy (BODY_25 and BODY_25B); views with identical detections, without
+    detections, or sharing no frame with the others. Joints outside the image are then dropped and counted.
 
     Args:
         config: where the files are.
         sequence: the sequence name written in every row.
+        option_names: how messages name the options (keys of :data:`OPTION_NAMES`; missing keys keep its names).
 
     Returns:
-        The capture's tables and summary.
+        The capture's tables and summary (with the checks' warnings).
 
     Raises:
         FormatError: a bad detection or camera file (naming the file and field); known cameras that do not match
             the views (count, image size).
         FileNotFoundError: a folder or file does not exist.
-        ValueError: no detection at all.
+        ValueError: no detection at all; an input check failed (``InputCheckError``, ``SkeletonMismatch``: the
+            message names the view and the option to change).
     """
+    names = {**OPTION_NAMES, **(option_names or {})}
+    check_view_paths(config.views, names["views"])
     table = read_detections(list(config.views), config.format, sequence=sequence,
                             image_size=list(config.image_sizes_px), skeleton=config.skeleton)
     placeholders = dict(table.attrs.get(PLACEHOLDERS_ATTR, {}))
     sizes = dict(table.attrs.get("image_size_px", {}))
     if not len(table):
         raise FormatError(config.views[0], None, "at least one detected joint in the capture's files", "none")
+    V = len(config.views)
+    view_names = [_view_name(p, v) for v, p in enumerate(config.views)]
+    warnings = check_image_sizes(table, sizes, view_names, names["image_size"])
+    skeleton = config.skeleton or table.attrs.get("skeleton")
+    if skeleton is not None:
+        family = OPENPOSE_SKELETONS if config.format == "openpose" else COCO_SKELETONS
+        check_skeleton_fit(table, skeleton, [s for s in family if s != skeleton], names["skeleton"])
     width = table["view"].map(lambda v: sizes[v][0]).to_numpy(float)
     height = table["view"].map(lambda v: sizes[v][1]).to_numpy(float)
-    x, y = table["x_px"].to_numpy(), table["y_px"].to_numpy()
-    off = ((x < -PIXEL_EDGE_PX) | (y < -PIXEL_EDGE_PX) | (x > width - 1 + PIXEL_EDGE_PX)
-           | (y > height - 1 + PIXEL_EDGE_PX))
+    off = off_image(table["x_px"].to_numpy(), table["y_px"].to_numpy(), width, height)
     off_per_view = table.loc[off, "view"].value_counts()
     if off.any():
         log.warning("%s: dropped %d joints outside the image (per view %s)", sequence, int(off.sum()),
                     off_per_view.to_dict())
     detections = table.loc[~off].reset_index(drop=True)
-    V = len(config.views)
-    names = [_view_name(p, v) for v, p in enumerate(config.views)]
+    warnings += check_views(detections, view_names, names["views"])
     views = validate_table(pd.DataFrame({
-        "sequence": sequence, "view": np.arange(V), "name": names,
+        "sequence": sequence, "view": np.arange(V), "name": view_names,
         "width_px": [sizes[v][0] for v in range(V)], "height_px": [sizes[v][1] for v in range(V)],
     }), "views")
-    gt_cameras = _known_cameras(config, sequence, sizes) if config.cameras is not None else empty_table("cameras")
+    view_sizes = [tuple(sizes[v]) for v in range(V)]
+    gt_cameras = (read_capture_cameras(config.reference_cameras, config.reference_cameras_format, sequence, view_names,
+                                       view_sizes, format_option=names["reference_cameras_format"])
+                  if config.reference_cameras is not None else empty_table("cameras"))
+    known_cameras = (read_capture_cameras(config.cameras, config.cameras_format, sequence, view_names, view_sizes,
+                                          views=config.known_views, format_option=names["cameras_format"],
+                                          views_option=names["known_views"])
+                     if config.cameras is not None else empty_table("cameras"))
     per_view = detections.groupby("view")
     dets = per_view.apply(lambda g: g.groupby(["frame", "det_id"]).ngroups, include_groups=False)
     frames = per_view["frame"].nunique()
     summary = CaptureSummary(
-        names=tuple(names),
+        names=tuple(view_names),
         frames=tuple(int(frames.get(v, 0)) for v in range(V)),
         detections=tuple(int(dets.get(v, 0)) for v in range(V)),
         placeholders=tuple(int(placeholders.get(v, 0)) for v in range(V)),
         off_image_joints=tuple(int(off_per_view.get(v, 0)) for v in range(V)),
         skeleton=config.skeleton or f"{table.attrs.get('skeleton') or 'unknown'} (told from the array length)",
-        known_cameras=config.cameras is not None,
+        known_cameras=tuple(view_names[int(v)] for v in sorted(known_cameras["view"])),
+        reference_cameras=config.reference_cameras is not None,
         total_frames=int(detections["frame"].nunique()),
+        warnings=tuple(warnings),
     )
-    return Capture(detections=detections, views=views, gt_cameras=gt_cameras, summary=summary)
+    capture = Capture(detections=detections, views=views, gt_cameras=gt_cameras, summary=summary,
+                      known_cameras=known_cameras)
+    return _drop_views(capture, config.drop_views, names["drop_views"]) if config.drop_views else capture
+
+
+def _drop_views(capture: Capture, drop: tuple[str, ...], option: str) -> Capture:
+    """The capture without the views named in ``drop`` (the rest numbered again in order).
+
+    Raises:
+        ValueError: a name that is no view, or fewer than two views left.
+    """
+    names = list(capture.summary.names)
+    unknown = [n for n in drop if n not in names]
+    if unknown:
+        raise ValueError(f"{option}: {unknown} are not views of the capture (its views: {names})")
+    keep = [v for v, n in enumerate(names) if n not in drop]
+    if len(keep) < 2:
+        raise ValueError(f"{option}: {len(keep)} view(s) left; a capture needs two views or more")
+    number = {old: new for new, old in enumerate(keep)}
+
+    def renumber(table: pd.DataFrame) -> pd.DataFrame:
+        kept = table[table["view"].isin(keep)].copy()
+        kept["view"] = kept["view"].map(number).astype(table["view"].dtype)
+        return kept.reset_index(drop=True)
+
+    summary = capture.summary
+    pick = lambda values: tuple(values[v] for v in keep)  # noqa: E731
+    summary = dataclasses.replace(
+        summary, names=pick(summary.names), frames=pick(summary.frames), detections=pick(summary.detections),
+        placeholders=pick(summary.placeholders), off_image_joints=pick(summary.off_image_joints),
+        known_cameras=tuple(n for n in summary.known_cameras if n not in drop),
+        warnings=summary.warnings + (f"views {list(drop)} left out ({option})",))
+    return Capture(renumber(capture.detections), renumber(capture.views), renumber(capture.gt_cameras), summary,
+                   renumber(capture.known_cameras))
 
 
 def _view_name(path: Path, view: int) -> str:
     name = path.name if path.is_dir() else path.stem
     return name or f"view_{view}"
-
-
-def _known_cameras(config: CaptureConfig, sequence: str, sizes: dict[int, tuple[int, int]]) -> pd.DataFrame:
-    cameras = read_cameras(config.cameras, config.cameras_format)
-    if len(cameras) != len(config.views):
-        raise FormatError(config.cameras, None, f"{len(config.views)} cameras (one per view, in view order)",
-                          f"{len(cameras)} cameras")
-    for v, cam in enumerate(cameras):
-        if (int(cam.width_px), int(cam.height_px)) != tuple(sizes[v]):
-            raise FormatError(config.cameras, f"camera {v} image size",
-                              f"the image size of view {v} ({sizes[v][0]}x{sizes[v][1]})",
-                              f"{cam.width_px}x{cam.height_px}")
-    return cameras_to_table(cameras, sequence)
-
-
-CAPTURE_FILE = "capture.yaml"
-"""The file that describes a capture folder (written last: its presence says the folder is complete)."""
-
-
-def read_capture_folder(folder: Path) -> tuple[CaptureConfig, str]:
-    """The config and sequence name of a self-describing capture folder.
-
-    The folder holds the detections (one sub-folder of OpenPose JSON per view, or one COCO-style JSON file per
-    view) and ``capture.yaml``: the options of :class:`CaptureConfig` (``views`` optional: by default the
-    sub-folders, for ``format: openpose``, or the ``*.json`` files, for ``format: coco``, in sorted order; paths
-    relative to the folder) and an optional ``sequence`` name (default ``"capture"``).
-
-    Raises:
-        FileNotFoundError: no ``capture.yaml``.
-        ValueError: ``capture.yaml`` is not a YAML mapping of valid options (the message names the file and the
-            option).
-    """
-    import yaml
-
-    path = Path(folder) / CAPTURE_FILE
-    try:
-        options = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
-        raise FormatError(path, None, "valid YAML", str(err).replace("\n", " ")) from None
-    if not isinstance(options, dict):
-        raise FormatError(path, None, "a mapping of options (format, image_size, skeleton, cameras, fps)",
-                          type(options).__name__)
-    options = dict(options)
-    sequence = str(options.pop("sequence", "capture"))
-    if "views" not in options:
-        fmt = options.get("format", "openpose")
-        found = sorted(p for p in Path(folder).iterdir() if not p.name.startswith("."))
-        found = [p for p in found if p.is_dir()] if fmt == "openpose" else [p for p in found if p.suffix == ".json"]
-        options["views"] = [p.name for p in found]
-    try:
-        return CaptureConfig.from_options(options, Path(folder)), sequence
-    except ValueError as err:
-        raise ValueError(f"{path}: {err}") from None

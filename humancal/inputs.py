@@ -13,7 +13,8 @@ from humancal.sequences import SequenceSpec
 from humancal.settings import DATA_DIR_ENV, DataRootError
 from humancal.tables import empty_table, validate_table
 
-__all__ = ["DEFAULT_FPS", "SequenceInputs", "load_sequence_inputs", "sequence_fps", "sequence_principal_points"]
+__all__ = ["DEFAULT_FPS", "SequenceInputs", "body_fit_regime", "load_sequence_inputs", "sequence_fps",
+           "sequence_principal_points"]
 
 DEFAULT_FPS = 30.0
 """The frame rate assumed where a sequence does not say (a capture without ``fps``; Shelf)."""
@@ -36,6 +37,8 @@ class SequenceInputs:
         gt_people: ground-truth body shape per person (empty where unknown).
         gt_motions: ground-truth body-model motions (synthetic scenes: the anny parameters the people were made
             with; empty where unknown; evaluation only).
+        known_cameras: the cameras a user's capture brings for the method to use (some views or all; empty: the
+            cameras are calibrated from the people).
     """
 
     detections: pd.DataFrame
@@ -45,6 +48,7 @@ class SequenceInputs:
     gt_associations: pd.DataFrame
     gt_people: pd.DataFrame
     gt_motions: pd.DataFrame = field(default_factory=lambda: empty_table("motions"))
+    known_cameras: pd.DataFrame = field(default_factory=lambda: empty_table("cameras"))
 
 
 def sequence_fps(spec: SequenceSpec) -> tuple[float, str]:
@@ -76,6 +80,18 @@ def sequence_principal_points(spec: SequenceSpec, image_sizes_px: list[tuple[int
 
     where = f"{spec.source or 'the datasets config'}: {spec.key}: principal_point"
     return list(principal_points_option(value, image_sizes_px, where))
+
+
+def body_fit_regime(spec: SequenceSpec, default: str) -> str:
+    """The body fit's camera regime for a sequence: ``"fixed"`` for a capture whose cameras are all known (its
+    ``cameras`` option names no ``views``, or all of them) unless the option says ``refine``; else ``default``."""
+    cameras = spec.options.get("cameras")
+    if spec.kind != "capture" or not isinstance(cameras, dict) or cameras.get("refine", False):
+        return default
+    named = cameras.get("views")
+    dropped = set(spec.options.get("drop_views", []))
+    views = [v for v in spec.options.get("views", []) if not {Path(str(v)).name, Path(str(v)).stem} & dropped]
+    return "fixed" if named is None or len(named) >= len(views) else default
 
 
 def views_from_cameras(cameras: pd.DataFrame) -> pd.DataFrame:
@@ -126,8 +142,8 @@ def _load_synthetic(spec: SequenceSpec, body) -> SequenceInputs:
 
 
 def _load_capture(spec: SequenceSpec) -> SequenceInputs:
-    """A user's capture: detections and views; known cameras (when given) as the ground-truth cameras; no other
-    ground truth."""
+    """A user's capture: detections and views; known cameras (used by the method) and reference cameras (the
+    ground-truth cameras) when given; no other ground truth."""
     from humancal.captures import CaptureConfig, load_capture
 
     base = Path(spec.source).parent if spec.source else None
@@ -145,6 +161,7 @@ def _load_capture(spec: SequenceSpec) -> SequenceInputs:
         gt_poses3d=empty_table("poses3d"),
         gt_associations=empty_table("associations"),
         gt_people=empty_table("people"),
+        known_cameras=capture.known_cameras,
     )
 
 

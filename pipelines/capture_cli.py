@@ -1,12 +1,16 @@
 """``humancal add``: register a user's own capture (detector output per view) as a partition.
 
     humancal add NAME --openpose DIR [DIR ...] --image-size WxH [WxH ...] [--skeleton S]
-                      [--cameras FILE [--cameras-format F]] [--fps FPS] [--sequence SEQ]
+                      [--cameras FILE [--cameras-format F] [--known-views NAME ...] [--refine-cameras]]
+                      [--reference-cameras FILE [--reference-cameras-format F]] [--drop-view NAME ...]
+                      [--fps FPS] [--sequence SEQ]
     humancal add NAME --coco FILE [FILE ...] --image-size WxH [...]
 
-Everything is checked first: every file is read once, and an error names the file and the field; nothing is
-written then. On success the capture is added to the user datasets file (``<state dir>/datasets.yaml``, written
-atomically) and the partition ``NAME__SEQ`` is registered; ``humancal update --partition NAME__SEQ`` calibrates it.
+Everything is checked first: every file is read once, and an error names the file and the field, or the view and
+the flag to change (a wrong --image-size, a --skeleton the people's anatomy contradicts, views given twice or
+sharing no frame); nothing is written then. Probably-wrong input that can still be used is printed as warnings.
+On success the capture is added to the user datasets file (``<state dir>/datasets.yaml``, written atomically)
+and the partition ``NAME__SEQ`` is registered; ``humancal update --partition NAME__SEQ`` calibrates it.
 """
 
 from __future__ import annotations
@@ -20,8 +24,7 @@ DEFAULT_SEQUENCE = "capture"
 
 def add_parser(subparsers) -> None:
     """Add the ``add`` command to the CLI's subparsers."""
-    from humancal.formats import CAMERA_FORMATS
-    from humancal.formats.detections import COCO_SKELETONS, OPENPOSE_SKELETONS
+    from pipelines.format_names import CAMERA_FORMATS, COCO_SKELETONS, OPENPOSE_SKELETONS  # light: --help stays fast
 
     p = subparsers.add_parser(
         "add", help="register your own capture (OpenPose JSON folders or COCO keypoint files, one per view)",
@@ -38,8 +41,22 @@ def add_parser(subparsers) -> None:
     p.add_argument("--skeleton", choices=[*OPENPOSE_SKELETONS, *COCO_SKELETONS],
                    help="the detector's keypoint format (required for 25-point OpenPose output: body25 or body25b)")
     p.add_argument("--cameras", type=Path, metavar="FILE",
-                   help="known cameras, one per view in view order (evaluation only: never used by the method)")
-    p.add_argument("--cameras-format", choices=CAMERA_FORMATS, help="format of --cameras (default: from the file)")
+                   help="known cameras, used instead of a calibration from the people: one per view in view order, "
+                        "or one per view of --known-views (the other views are calibrated around them)")
+    camera_read_formats = (*CAMERA_FORMATS, "qualisys")  # humancal.formats.CAMERA_READ_FORMATS (qualisys: read only)
+    p.add_argument("--cameras-format", choices=camera_read_formats,
+                   help="format of --cameras (default: from the file name: .toml pose2sim, .qca.txt qualisys, ...)")
+    p.add_argument("--known-views", nargs="+", metavar="NAME",
+                   help="the views (folder or file names) whose cameras --cameras holds, in the file's order")
+    p.add_argument("--refine-cameras", action="store_true",
+                   help="let the body fit refine the known cameras (default: they are held as given)")
+    p.add_argument("--reference-cameras", type=Path, metavar="FILE",
+                   help="the true cameras, one per view in view order: evaluation only (camera error rows of "
+                        "`humancal report`), never used by the method")
+    p.add_argument("--reference-cameras-format", choices=camera_read_formats,
+                   help="format of --reference-cameras (default: from the file name)")
+    p.add_argument("--drop-view", action="append", metavar="NAME", default=[],
+                   help="leave this view (folder or file name) out of the capture (repeatable)")
     p.add_argument("--fps", type=float, help="frames per second")
     p.add_argument("--principal-point", nargs="+", metavar="CX,CY",
                    help="known principal point in pixels, e.g. 963.5,541.2: one for all views or one per view "
@@ -72,8 +89,12 @@ def cmd_add(args: argparse.Namespace) -> int:
             points = points * len(views)
         elif len(points) != len(views):
             raise ValueError(f"--principal-point: expected one point or one per view ({len(views)}), got {len(points)}")
-    if args.cameras_format and not args.cameras:
-        raise ValueError("--cameras-format: given without --cameras")
+    for flag, value, needs in (("--cameras-format", args.cameras_format, args.cameras),
+                               ("--known-views", args.known_views, args.cameras),
+                               ("--refine-cameras", args.refine_cameras, args.cameras),
+                               ("--reference-cameras-format", args.reference_cameras_format, args.reference_cameras)):
+        if value and not needs:
+            raise ValueError(f"{flag}: given without --{'reference-' if 'reference' in flag else ''}cameras")
     config = CaptureConfig(
         format="openpose" if args.openpose else "coco",
         views=tuple(views),
@@ -81,13 +102,21 @@ def cmd_add(args: argparse.Namespace) -> int:
         skeleton=args.skeleton,
         cameras=args.cameras.expanduser().resolve() if args.cameras else None,
         cameras_format=args.cameras_format,
+        known_views=tuple(args.known_views) if args.known_views else None,
+        refine_cameras=args.refine_cameras,
+        reference_cameras=args.reference_cameras.expanduser().resolve() if args.reference_cameras else None,
+        reference_cameras_format=args.reference_cameras_format,
+        drop_views=tuple(args.drop_view),
         fps=args.fps,
         principal_points_px=tuple(points) if points else None,
     )
     key = partition_key(args.name, args.sequence)
     if key in load_datasets_config():  # the cheap check first; add_user_sequence checks again before writing
         raise DatasetsConfigError(f"partition {key} exists; choose another NAME or --sequence")
-    capture = load_capture(config, args.sequence)
+    flags = {"views": "--openpose" if args.openpose else "--coco", "image_size": "--image-size",
+             "skeleton": "--skeleton", "cameras_format": "--cameras-format", "known_views": "--known-views",
+             "reference_cameras_format": "--reference-cameras-format", "drop_views": "--drop-view"}
+    capture = load_capture(config, args.sequence, option_names=flags)
     spec = add_user_sequence(args.name, args.sequence, "capture", config.to_options())
     register_capture_partition(spec.key)
     print(f"registered {spec.key} in {user_config_path()}:")

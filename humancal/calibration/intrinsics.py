@@ -228,13 +228,12 @@ def _estimate_view(
     n = len(keep)
 
     def fail(reason: str, inliers: int = 0) -> IntrinsicsEstimate:
-        message = (
-            f"view {view}: {reason}; its focal length cannot be estimated from upright people "
-            f"(set IntrinsicsConfig(missing_upright='defer') to recover it from the other views)"
-        )
         if config.missing_upright == "raise":
-            raise CalibrationError(message)
-        logger.warning("%s; deferred to the multi-view stage", message)
+            raise CalibrationError(
+                f"view {view}: {reason}; its focal length cannot be estimated from upright people "
+                f"(IntrinsicsConfig(missing_upright='defer') recovers it from the other views)"
+            )
+        logger.warning("view %d: %s: its focal length will come from the other views", view, reason)
         return _deferred(view, size, pp, n, inliers)
 
     if n < config.min_inliers:

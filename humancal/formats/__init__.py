@@ -5,7 +5,7 @@
   derived joints (neck, mid-hip, Shelf head joints).
 * :mod:`humancal.formats.detections`: OpenPose / COCO-style detection files <-> the canonical detections table.
 * :mod:`humancal.formats.cameras`: camera files (humancal JSON, Shelf, Pose2Sim/anipose TOML, EasyMocap YAML,
-  COLMAP text) <-> :class:`humancal.camera.Camera` lists.
+  COLMAP text; Qualisys .qca.txt read only) <-> :class:`humancal.camera.Camera` lists.
 
 Every reader raises :class:`FormatError` (a ``ValueError``) with a one-line message naming the file, the field
 and what was expected. Documentation with examples: ``docs/formats.md``.
@@ -13,6 +13,7 @@ and what was expected. Documentation with examples: ``docs/formats.md``.
 
 from humancal.formats.cameras import (
     CAMERA_FORMATS,
+    CAMERA_READ_FORMATS,
     infer_camera_format,
     read_cameras,
     read_cameras_with_names,
@@ -25,6 +26,7 @@ from humancal.formats.skeletons import SKELETONS, Skeleton, get_skeleton
 
 __all__ = [
     "CAMERA_FORMATS",
+    "CAMERA_READ_FORMATS",
     "DERIVED_JOINTS",
     "DETECTION_FORMATS",
     "IMAGE_SIZE_ATTR",

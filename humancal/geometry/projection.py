@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["project_points_torch", "project_points_np", "MIN_DEPTH_M"]
+__all__ = ["project_points_torch", "project_points_np", "undistort_points_px", "MIN_DEPTH_M"]
 
 MIN_DEPTH_M = 1e-6
 """Points nearer to the camera plane than this (or behind it), metres, are not projected."""
@@ -118,3 +118,28 @@ def project_points_np(
     px = px.numpy()
     px[~in_front.numpy()] = np.nan
     return px, depth.numpy()
+
+
+def undistort_points_px(points_px: np.ndarray, K: np.ndarray, distortion: np.ndarray) -> np.ndarray:
+    """Pixels of a distorting lens moved to where the same camera without distortion (same ``K``) sees them:
+    the inverse of the distortion of :func:`project_points_np` (OpenCV's iterative ``undistortPoints``).
+
+    Args:
+        points_px: (N, 2) observed pixels (NaN rows stay NaN).
+        K: (3, 3) intrinsics, pixels.
+        distortion: (5,) ``(k1, k2, p1, p2, k3)``.
+
+    Returns:
+        (N, 2) undistorted pixels.
+    """
+    import cv2
+
+    points = np.asarray(points_px, dtype=np.float64).reshape(-1, 2)
+    out = np.full_like(points, np.nan)
+    finite = np.isfinite(points).all(1)
+    if finite.any():
+        K = np.asarray(K, dtype=np.float64)
+        moved = cv2.undistortPoints(points[finite].reshape(-1, 1, 2), K, np.asarray(distortion, np.float64), P=K,
+                                    criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9))
+        out[finite] = moved.reshape(-1, 2)
+    return out

@@ -40,11 +40,17 @@ def _frame(folder: Path, name: str, people: list[dict]) -> Path:
     return path
 
 
+def _shifted(joints: dict[str, tuple[float, float, float]], dx: float) -> dict[str, tuple[float, float, float]]:
+    return {name: (x + dx, y, c) for name, (x, y, c) in joints.items()}
+
+
 def _views(root: Path, frames: int = 3, views: int = 2) -> list[str]:
-    """Small OpenPose folders: one standing person per frame, files named like OpenPose's."""
+    """Small OpenPose folders: one standing person per frame (a few pixels apart from view to view: two cameras never
+    see the same picture), files named like OpenPose's."""
     for v in range(views):
         for f in range(frames):
-            _frame(root / f"cam{v + 1:02d}", f"cam{v + 1:02d}_{f:012d}_keypoints.json", [_person(STANDING)])
+            person = _person(_shifted(STANDING, 7.0 * v))
+            _frame(root / f"cam{v + 1:02d}", f"cam{v + 1:02d}_{f:012d}_keypoints.json", [person])
     return [str(root / f"cam{v + 1:02d}") for v in range(views)]
 
 
@@ -65,7 +71,7 @@ def test_add_writes_the_user_datasets_file_registers_the_partition_and_prints_a_
     out = capsys.readouterr().out
     assert "registered lab__capture" in out
     assert "view 0 cam01: 3 frames with detections, 3 detections, 0 placeholder" in out
-    assert "2 views, 3 frames, 6 detections, skeleton body25, no known cameras" in out
+    assert "2 views, 3 frames, 6 detections, skeleton body25, cameras calibrated from the people" in out
     entry = yaml.safe_load(_user_file(state).read_text())["datasets"]["lab"]
     assert entry["kind"] == "capture"
     assert entry["sequences"]["capture"] == {"format": "openpose", "views": views, "image_size": [640, 480],
@@ -202,7 +208,35 @@ def test_known_cameras_must_match_the_views(tmp_path, state, capsys):
     write_cameras([cam, cam], tmp_path / "calib.toml", "pose2sim")
     assert _add("lab", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25",
                 "--cameras", str(path)) == 0
-    assert "known cameras given (evaluation only)" in capsys.readouterr().out
+    assert "every camera known (used instead of a calibration)" in capsys.readouterr().out
+
+
+def test_one_known_camera_among_unknown_ones_and_reference_cameras(tmp_path, state, capsys):
+    from humancal.camera import Camera
+    from humancal.formats import write_cameras
+
+    views = _views(tmp_path / "op")
+    cam = Camera(K=np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]]), R_cam_from_world=np.eye(3),
+                 t_cam_from_world_m=np.array([0.0, 0.0, 3.0]), width_px=640, height_px=480)
+    one = write_cameras([cam], tmp_path / "one.toml", "pose2sim")
+    both = write_cameras([cam, cam], tmp_path / "both.toml", "pose2sim")
+    base = ["lab", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25"]
+    assert _add(*base, "--cameras", str(one), "--known-views", "nope") == 2
+    _expect_error(capsys, state, "one.toml", "--known-views", "distinct names of the capture's views", "'nope'")
+    assert _add(*base, "--known-views", "cam02") == 2
+    _expect_error(capsys, state, "--known-views: given without --cameras")
+    assert _add(*base, "--cameras", str(one), "--known-views", "cam02", "--reference-cameras", str(both)) == 0
+    out = capsys.readouterr().out
+    assert "cameras of cam02 known (the others calibrated around them); reference cameras given (evaluation only)" \
+        in out
+    entry = yaml.safe_load(_user_file(state).read_text())["datasets"]["lab"]["sequences"]["capture"]
+    assert entry["cameras"] == {"path": str(one), "views": ["cam02"]}
+    assert entry["reference_cameras"] == {"path": str(both)}
+    from humancal.inputs import load_sequence_inputs
+    from humancal.sequences import load_datasets_config
+
+    inputs = load_sequence_inputs(load_datasets_config()["lab__capture"], body_model=lambda: None, data_root=None)
+    assert inputs.known_cameras["view"].tolist() == [1] and len(inputs.gt_cameras) == 2
 
 
 def test_coco_files_with_placeholders(tmp_path, state, capsys):
@@ -210,7 +244,7 @@ def test_coco_files_with_placeholders(tmp_path, state, capsys):
     files = []
     for v in range(2):
         entries = [{"image_id": f, "category_id": 1, "score": 0.9,
-                    "keypoints": _person(STANDING, coco17)["pose_keypoints_2d"]} for f in range(5)]
+                    "keypoints": _person(_shifted(STANDING, 7.0 * v), coco17)["pose_keypoints_2d"]} for f in range(5)]
         entries.append({"image_id": 2, "category_id": 1, "score": 0.0, "keypoints": []})
         files.append(tmp_path / f"cam{v}.json")
         files[-1].write_text(json.dumps(entries))
@@ -218,6 +252,148 @@ def test_coco_files_with_placeholders(tmp_path, state, capsys):
     out = capsys.readouterr().out
     assert "view 1 cam1: 5 frames with detections, 5 detections, 1 placeholder entries skipped" in out
     assert "skeleton coco17 (told from the array length)" in out
+
+
+# --- inputs checked before anything runs: wrong image size, wrong skeleton, views that cannot be right ------------
+
+# A standing person facing the camera, canonical joints in pixels relative to the point between the feet (y down,
+# the person's left at +x), 380 px tall.
+BODY = {"nose": (0, -370), "left_eye": (6, -378), "right_eye": (-6, -378), "left_ear": (14, -372),
+        "right_ear": (-14, -372), "left_shoulder": (40, -310), "right_shoulder": (-40, -310),
+        "left_elbow": (48, -240), "right_elbow": (-48, -240), "left_wrist": (52, -175), "right_wrist": (-52, -175),
+        "left_hip": (25, -190), "right_hip": (-25, -190), "left_knee": (27, -100), "right_knee": (-27, -100),
+        "left_ankle": (28, -15), "right_ankle": (-28, -15), "left_big_toe": (36, 0), "right_big_toe": (-36, 0),
+        "left_small_toe": (42, 0), "right_small_toe": (-42, 0), "left_heel": (26, -4), "right_heel": (-26, -4)}
+
+
+def _people_views(root: Path, skeleton: str = "body25", views: int = 2, frames=range(12), feet=(500.0, 700.0),
+                  step=(25.0, 4.0), scale: float = 1.0) -> list[str]:
+    """OpenPose folders of one walking person per frame, written with ``skeleton``'s joint order (BODY_25B files
+    are the canonical joints re-ordered by the writer)."""
+    import pandas as pd
+
+    from humancal.formats import write_openpose
+
+    rows = []
+    for v in range(views):
+        for f in frames:
+            x0, y0 = feet[0] + step[0] * f + 40.0 * v, feet[1] + step[1] * f
+            rows += [("cap", f, v, 0, joint, x0 + scale * dx, y0 + scale * dy, 0.9) for joint, (dx, dy) in BODY.items()]
+    table = pd.DataFrame(rows, columns=["sequence", "frame", "view", "det_id", "joint", "x_px", "y_px", "score"])
+    return [str(folder) for folder in write_openpose(table, root, skeleton=skeleton).values()]
+
+
+def test_portrait_cameras_declared_landscape_are_an_error_proposing_the_transposed_size(tmp_path, state, capsys):
+    views = _people_views(tmp_path / "op", feet=(300.0, 1850.0), step=(20.0, -3.0), scale=4.0)  # 1088x1920 videos
+    assert _add("lab", "--openpose", *views, "--image-size", "1920x1088", "--skeleton", "body25") == 2
+    _expect_error(capsys, state, "view 0 (view_00): 53 % of the joints lie outside the declared 1920x1088 image; the "
+                  "detections span 109-711 x 306-1850 px: is the image 1088x1920 (--image-size)?")
+    assert _add("lab", "--openpose", *views, "--image-size", "1088x1920", "--skeleton", "body25") == 0
+
+
+def test_an_image_size_far_too_small_proposes_a_size_holding_the_joints(tmp_path, state, capsys):
+    views = _people_views(tmp_path / "op", feet=(300.0, 900.0), step=(100.0, 0.0))  # joints up to 1480 x 900 px
+    assert _add("lab", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25") == 2
+    _expect_error(capsys, state, "view 0 (view_00): ", "outside the declared 640x480 image",
+                  "is the image 1920x1080 (--image-size)?")
+
+
+def test_a_few_extrapolated_off_image_joints_stay_accepted_and_counted(tmp_path, state, capsys):
+    # the person walks out at the right: in the last frames some joints are past x = 1919 (trackers extrapolate)
+    views = _people_views(tmp_path / "op", frames=range(40), feet=(1300.0, 700.0), step=(15.0, 0.0))
+    assert _add("lab", "--openpose", *views, "--image-size", "1920x1080", "--skeleton", "body25") == 0
+    out = capsys.readouterr().out
+    # 35 of view 1's 920 joints (4 %): over the 20-joint minimum, under the 10 % share
+    assert "view 1 view_01: 40 frames with detections, 40 detections, 0 placeholder entries skipped, 35 off-image " \
+        "joints dropped" in out
+
+
+def test_landscape_cameras_declared_portrait_warn_when_the_people_stay_in_the_top_part(tmp_path, state, capsys):
+    views = _people_views(tmp_path / "op", feet=(300.0, 1000.0), step=(30.0, 0.0))  # within 1080 x 1000 px
+    assert _add("lab", "--openpose", *views, "--image-size", "1088x1920", "--skeleton", "body25") == 0
+    out = capsys.readouterr().out
+    assert "warning: view 0 (view_00): the joints span " in out
+    assert "% of the declared 1088x1920 image: is the image 1920x1088 (--image-size)?" in out
+
+
+def test_detections_within_the_top_left_quarter_warn_of_a_smaller_video(tmp_path, state, capsys):
+    views = _people_views(tmp_path / "op", feet=(100.0, 450.0))  # a 960x540 video's detections
+    assert _add("lab", "--openpose", *views, "--image-size", "1920x1080", "--skeleton", "body25") == 0
+    assert "warning: view 0 (view_00): the joints span 54-421 x 73-494 px, within the top-left quarter of the " \
+           "declared 1920x1080 image: were the detections made on a smaller video (--image-size)?" in \
+           capsys.readouterr().out
+
+
+@pytest.mark.parametrize("written, declared", [("body25b", "body25"), ("body25", "body25b")])
+def test_a_25_point_skeleton_the_anatomy_contradicts_is_an_error_naming_the_other(tmp_path, state, capsys, written,
+                                                                                  declared):
+    views = _people_views(tmp_path / "op", skeleton=written)
+    assert _add("lab", "--openpose", *views, "--image-size", "1920x1080", "--skeleton", declared) == 2
+    _expect_error(capsys, state, f"the 25-point detections do not look like {declared}: joints that are neighbours "
+                  "on a body (nose and eyes, eyes and ears, ankles and heels and big toes) lie a median ",
+                  f"when read as {written}: is the skeleton {written} (--skeleton)?")
+    assert _add("lab", "--openpose", *views, "--image-size", "1920x1080", "--skeleton", written) == 0
+
+
+def test_views_that_cannot_be_right_are_errors(tmp_path, state, capsys):
+    views = _people_views(tmp_path / "op", views=3)
+    size = ["--image-size", "1920x1080", "--skeleton", "body25"]
+    assert _add("lab", "--openpose", views[0], *size) == 2
+    _expect_error(capsys, state, "--openpose: expected two views or more (one camera cannot be calibrated", "got 1")
+    assert _add("lab", "--openpose", views[0], views[1], views[0], *size) == 2
+    _expect_error(capsys, state, "--openpose: views 0 and 2 are the same path",
+                  "give each camera's folder or file once")
+    import shutil
+
+    shutil.copytree(views[1], tmp_path / "copy")
+    assert _add("lab", "--openpose", views[0], views[1], str(tmp_path / "copy"), *size) == 2
+    _expect_error(capsys, state, "view 1 (view_01) and view 2 (copy) hold identical detections: the same camera's "
+                  "files given twice (--openpose)?")
+    late = _people_views(tmp_path / "late", views=1, frames=range(300, 312), step=(1.0, 0.0))
+    assert _add("lab", "--openpose", views[0], views[1], *late, *size) == 2
+    _expect_error(capsys, state, "view 2 (view_00): none of its frames (300-311) has detections in another view "
+                  "(frames 0-11): are the videos in sync, and do the file names count frames the same way?")
+    for f in range(12):
+        _frame(tmp_path / "empty", f"empty_{f:012d}_keypoints.json", [])
+    assert _add("lab", "--openpose", views[0], views[1], str(tmp_path / "empty"), *size) == 2
+    _expect_error(capsys, state, "view 2 (empty): no detection in any of its files: is it the right folder or file "
+                  "(--openpose)?")
+
+
+def test_views_sharing_few_frames_are_registered_with_a_warning(tmp_path, state, capsys):
+    first = _people_views(tmp_path / "a", views=1, frames=range(0, 20))
+    second = _people_views(tmp_path / "b", views=1, frames=range(17, 40), feet=(520.0, 690.0))
+    assert _add("lab", "--openpose", *first, *second, "--image-size", "1920x1080", "--skeleton", "body25") == 0
+    out = capsys.readouterr().out
+    assert "warning: view 1 (view_00) shares only 3 frame(s) with the other views (17-19): the calibration needs " \
+           "people seen by several views at once" in out
+
+
+def test_camera_files_of_unknown_format_name_the_flag(tmp_path, state, capsys):
+    views = _views(tmp_path / "op")
+    (tmp_path / "calib.yaml").write_text("cameras: []")
+    assert _add("lab", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25",
+                "--cameras", str(tmp_path / "calib.yaml")) == 2
+    _expect_error(capsys, state, "calib.yaml: expected a camera file whose format its name tells (.toml, .json, "
+                  ".qca.txt, intri.yml, cameras.txt), or its format given with --cameras-format (one of [")
+
+
+def test_qualisys_calibration_as_known_cameras(tmp_path, state, capsys):
+    views = _people_views(tmp_path / "op")
+    cameras = "".join(
+        f'<camera serial="{serial}" model="Miqus Video"><fov_video left="0" top="0" right="1919" bottom="1079"/>'
+        f'<transform x="{x}" y="-4000" z="1500" r11="1" r12="0" r13="0" r21="0" r22="0" r23="1" r31="0" r32="-1" '
+        'r33="0"/><intrinsic focalLengthU="96000" focalLengthV="96000" centerPointU="61440" centerPointV="34560" '
+        'skew="0"/></camera>'
+        for serial, x in (("28513", -1000), ("28514", 1000))
+    )
+    path = tmp_path / "session.qca.txt"
+    path.write_text(f"<?xml version='1.0'?><calibration><cameras>{cameras}</cameras></calibration>")
+    assert _add("lab", "--openpose", *views, "--image-size", "1920x1080", "--skeleton", "body25",
+                "--cameras", str(path)) == 0
+    assert "every camera known (used instead of a calibration)" in capsys.readouterr().out
+    entry = yaml.safe_load(_user_file(state).read_text())["datasets"]["lab"]["sequences"]["capture"]
+    assert entry["cameras"] == {"path": str(path)}
 
 
 # --- end to end: synthetic truth -> files -> add -> update -> export -> compare -------------------------------------
@@ -304,7 +480,7 @@ def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state
     # A known principal point half a pixel off the centre (the truth's): small enough not to matter, and it must
     # reach the calibrated cameras, which would otherwise have theirs at the image centre.
     args = ["--openpose", *map(str, folders.values()), "--image-size", "1920x1080", "--skeleton", "body25",
-            "--cameras", str(tmp_path / "capture" / "calib.toml"), "--principal-point", "960.5,539.5"]
+            "--reference-cameras", str(tmp_path / "capture" / "calib.toml"), "--principal-point", "960.5,539.5"]
     estimated = _calibrate_and_compare("oplab__capture", args, tmp_path, monkeypatch, capsys)
     _assert_close_to_truth(estimated, truth, "openpose capture", capsys)
     for camera in estimated:

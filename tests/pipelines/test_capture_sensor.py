@@ -15,10 +15,10 @@ BODY25 = SKELETONS["body25"]
 
 def _drop(inbox: Path, name: str, capture: dict | None, frames: int = 3) -> Path:
     folder = inbox / name
-    flat = np.zeros((25, 3))
-    flat[BODY25.index("nose")] = (100.0, 50.0, 0.9)
-    flat[BODY25.index("left_ankle")] = (100.0, 250.0, 0.8)
-    for view in ("cam1", "cam2"):
+    for v, view in enumerate(("cam1", "cam2")):
+        flat = np.zeros((25, 3))  # each camera sees the person elsewhere (identical views are refused as copies)
+        flat[BODY25.index("nose")] = (100.0 + 7 * v, 50.0, 0.9)
+        flat[BODY25.index("left_ankle")] = (100.0 + 7 * v, 250.0, 0.8)
         (folder / view).mkdir(parents=True)
         for f in range(frames):
             people = [{"pose_keypoints_2d": flat.ravel().tolist()}]

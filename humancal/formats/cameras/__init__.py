@@ -8,6 +8,7 @@ Formats (``format=``):
 ``"anipose"``    anipose calibration TOML (same reader; translation in the board's unit, see ``length_unit_m``)
 ``"easymocap"``  EasyMocap ``intri.yml`` + ``extri.yml`` (:mod:`.easymocap`; image size is an argument)
 ``"colmap"``     COLMAP text model (:mod:`.colmap`)
+``"qualisys"``   Qualisys ``.qca.txt`` calibration (:mod:`.qualisys`; read only)
 
 Every reader converts to the house convention (``docs/conventions.md``): world -> camera rotation matrices,
 translations in metres, OpenCV pixel centres. Every write is atomic per file (temporary file in the same folder,
@@ -24,12 +25,14 @@ from humancal.camera import Camera
 from humancal.formats.cameras.colmap import read_colmap_text, write_colmap_text
 from humancal.formats.cameras.easymocap import read_easymocap, write_easymocap
 from humancal.formats.cameras.humancal_json import FORMAT_NAME, read_humancal_cameras, write_humancal_cameras
+from humancal.formats.cameras.qualisys import read_qualisys_calibration
 from humancal.formats.cameras.shelf import read_shelf_calibration, write_shelf_calibration
 from humancal.formats.cameras.toml_calib import read_toml_calibration, write_toml_calibration
 from humancal.formats.errors import FormatError
 
 __all__ = [
     "CAMERA_FORMATS",
+    "CAMERA_READ_FORMATS",
     "infer_camera_format",
     "read_cameras",
     "read_cameras_with_names",
@@ -39,6 +42,7 @@ __all__ = [
     "read_easymocap",
     "write_easymocap",
     "read_humancal_cameras",
+    "read_qualisys_calibration",
     "write_humancal_cameras",
     "read_shelf_calibration",
     "write_shelf_calibration",
@@ -49,14 +53,17 @@ __all__ = [
 CAMERA_FORMATS = ("humancal", "shelf", "pose2sim", "anipose", "easymocap", "colmap")
 """Formats ``read_cameras`` and ``write_cameras`` understand."""
 
+CAMERA_READ_FORMATS = (*CAMERA_FORMATS, "qualisys")
+"""Formats ``read_cameras`` understands (``qualisys`` is read only)."""
+
 
 def infer_camera_format(path: str | Path) -> str:
     """The camera format of ``path`` from its name, extension or (for ``.json``) its top-level keys.
 
     Rules: a folder holding ``intri.yml`` -> easymocap, holding ``cameras.txt`` -> colmap; ``intri.yml`` /
     ``extri.yml`` -> easymocap; ``cameras.txt`` / ``images.txt`` -> colmap; ``.toml`` -> pose2sim (read the same
-    way as anipose); ``.json`` with ``"format": "humancal.cameras"`` -> humancal, with objects holding ``K`` and
-    ``RT`` -> shelf.
+    way as anipose); ``.qca.txt`` -> qualisys; ``.json`` with ``"format": "humancal.cameras"`` -> humancal, with
+    objects holding ``K`` and ``RT`` -> shelf.
 
     Raises:
         FileNotFoundError: the path does not exist.
@@ -65,7 +72,8 @@ def infer_camera_format(path: str | Path) -> str:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or folder")
-    unknown = f"a camera file whose format can be told from its name (pass format= one of {list(CAMERA_FORMATS)})"
+    unknown = (f"a camera file whose format can be told from its name, or its format named (one of "
+               f"{list(CAMERA_READ_FORMATS)})")
     if path.is_dir():
         if (path / "intri.yml").is_file():
             return "easymocap"
@@ -78,6 +86,8 @@ def infer_camera_format(path: str | Path) -> str:
         return "colmap"
     if path.suffix.lower() == ".toml":
         return "pose2sim"
+    if path.name.lower().endswith(".qca.txt"):
+        return "qualisys"
     if path.suffix.lower() == ".json":
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
@@ -96,7 +106,7 @@ def read_cameras_with_names(path: str | Path, format: str | None = None, **optio
 
     Args:
         path: the camera file (or folder, for easymocap and colmap).
-        format: one of :data:`CAMERA_FORMATS`; ``None`` infers it (:func:`infer_camera_format`).
+        format: one of :data:`CAMERA_READ_FORMATS`; ``None`` infers it (:func:`infer_camera_format`).
         **options: passed to the format's reader: ``length_unit_m`` (pose2sim, anipose, easymocap, colmap),
             ``image_size`` (easymocap, required there), ``half_pixel_shift`` (colmap).
 
@@ -108,7 +118,7 @@ def read_cameras_with_names(path: str | Path, format: str | None = None, **optio
         FileNotFoundError: the file does not exist.
         TypeError: an option the format's reader does not take.
     """
-    fmt = infer_camera_format(path) if format is None else _known(format)
+    fmt = infer_camera_format(path) if format is None else _known(format, CAMERA_READ_FORMATS)
     reader = {
         "humancal": read_humancal_cameras,
         "shelf": read_shelf_calibration,
@@ -116,6 +126,7 @@ def read_cameras_with_names(path: str | Path, format: str | None = None, **optio
         "anipose": read_toml_calibration,
         "easymocap": read_easymocap,
         "colmap": read_colmap_text,
+        "qualisys": read_qualisys_calibration,
     }[fmt]
     return reader(path, **options)
 
@@ -157,7 +168,9 @@ def write_cameras(
     return write_colmap_text(cameras, path, names, **options)[0].parent
 
 
-def _known(format: str) -> str:
-    if format not in CAMERA_FORMATS:
-        raise FormatError(None, "format", f"one of {list(CAMERA_FORMATS)}", repr(format))
+def _known(format: str, known: tuple[str, ...] = CAMERA_FORMATS) -> str:
+    if format not in known:
+        read_only = sorted(set(CAMERA_READ_FORMATS) - set(known))
+        note = f" ({', '.join(read_only)}: read only)" if read_only and format in read_only else ""
+        raise FormatError(None, "format", f"one of {list(known)}{note}", repr(format))
     return format
