@@ -15,7 +15,7 @@ from assets.settings import BodyFitSettings
 from humancal.camera import CameraRig
 from humancal.fitting import body_observations, fit_bodies
 from humancal.fitting.plot import plot_fit_reprojection, plot_fit_scene
-from humancal.inputs import sequence_fps
+from humancal.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
 from humancal.prior import read_prior_info, shipped_prior
 from humancal.prior.weights import SHIPPED_VARIANT_STEMS
@@ -34,7 +34,7 @@ def _weights_digest(variant: str) -> str:
     return str(read_prior_info(SHIPPED_VARIANT_STEMS[variant])["digest"])[:12]
 
 
-CODE_VERSION = f"11-prior-{_weights_digest('motion_prior')}"
+CODE_VERSION = f"12-prior-{_weights_digest('motion_prior')}"
 """The code version names the shipped prior's weights digest: new weights make every fit stale."""
 
 
@@ -59,10 +59,15 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
              torch_runtime: TorchResource, datasets: DatasetsResource, detections: pd.DataFrame,
              associations: pd.DataFrame, skeletons3d: pd.DataFrame, extrinsics: pd.DataFrame):
     """Fit shape and motion of every tracked person and refine the cameras with them
-    (``humancal.fitting.fit_bodies``): from the detections, the association and the self-calibrated cameras only
-    (never ground truth)."""
+    (``humancal.fitting.fit_bodies``): from the detections, the association and the calibrated cameras only
+    (never ground truth). A capture whose cameras are all known holds them (regime ``fixed``) unless its
+    ``cameras`` option says ``refine``."""
     sequence = context.partition_key
-    fps, fps_source = sequence_fps(datasets.spec(sequence))
+    spec = datasets.spec(sequence)
+    fit_config = config.to_library().replace(cameras=body_fit_regime(spec, config.cameras))
+    if fit_config.cameras != config.cameras:
+        context.log.info(f"{sequence}: every camera is known: held by the fit (cameras: fixed)")
+    fps, fps_source = sequence_fps(spec)
     dense, _ = lifted_from_table(detections)
     rig = CameraRig.from_table(extrinsics)
     body = body_model.get()
@@ -72,7 +77,7 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
     context.log.info(f"{sequence}: fitting {observations.num_people} people over {observations.num_frames} frames "
                      f"in {observations.num_views} views at {fps:g} fps ({fps_source})")
     with torch_runtime.applied():
-        result = fit_bodies(body, observations, rig, fitting_prior(), config.to_library(), fps=fps,
+        result = fit_bodies(body, observations, rig, fitting_prior(), fit_config, fps=fps,
                             warnings=tuple(warnings))
     table = result.motions.to_table(sequence)
     refined = result.cameras
@@ -90,15 +95,15 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
         context.log.warning(warning)
     yield table_output(
         table, "motions", output_name="fitted_motions", rows=len(table), num_people=result.motions.num_people,
-        fps=fps, reprojection_error_px=round(result.reprojection_error_px, 3), cameras=config.cameras,
+        fps=fps, reprojection_error_px=round(result.reprojection_error_px, 3), cameras=fit_config.cameras,
         **{f"seconds_{stage}": round(s, 3) for stage, s in result.stage_seconds.items()},
         **{f"loss_{term}": float(v) for term, v in result.loss_terms.items()},
         prior_weights=_weights_digest("motion_prior"), warnings="; ".join(result.warnings) or "none", **pictures)
     changes = _camera_changes(rig, refined)
-    context.log.info(f"{sequence}: cameras ({config.cameras}) moved by " + ", ".join(
+    context.log.info(f"{sequence}: cameras ({fit_config.cameras}) moved by " + ", ".join(
         f"{k} {v:.3g}" for k, v in changes.items()))
     yield table_output(refined.to_table(sequence), "cameras", output_name="refined_cameras", rows=len(refined),
-                       regime=config.cameras, **changes)
+                       regime=fit_config.cameras, **changes)
 
 
 def _camera_changes(before: CameraRig, after: CameraRig) -> dict[str, float]:

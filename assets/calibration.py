@@ -19,7 +19,8 @@ from humancal.calibration import (
     intrinsics_to_table,
     plot_rigs,
 )
-from humancal.camera import cameras_to_table
+from humancal.camera import cameras_by_view, cameras_to_table, pinhole
+from humancal.capture_cameras import undistort_known_views
 from humancal.inputs import sequence_principal_points
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
@@ -29,6 +30,7 @@ from humancal.validation import (
     check_cameras_valid,
     check_focal_plausible,
     check_rig_geometry,
+    check_views_agree,
 )
 from resources.datasets import DatasetsResource
 from resources.torch import TorchResource
@@ -59,13 +61,16 @@ def _single_threaded_blas():
     return threadpoolctl.threadpool_limits(1)
 
 
-@sequence_asset("lifted_detections", code_version="1")
+@sequence_asset("lifted_detections", code_version="2")
 def detections(
     context: dg.AssetExecutionContext, torch_runtime: TorchResource, raw_detections: pd.DataFrame,
-    lifter_checkpoint: dict,
+    lifter_checkpoint: dict, known_cameras: pd.DataFrame,
 ) -> dg.Output:
-    """Every 2D detection with its lifted root-relative 3D pose (crop frame), height and upright score."""
+    """Every 2D detection with its lifted root-relative 3D pose (crop frame), height and upright score; the
+    detections of views whose known camera distorts are undistorted first (the method works with pinholes)."""
     start = time.perf_counter()
+    if len(known_cameras):
+        raw_detections = undistort_known_views(raw_detections, known_cameras)
     with torch_runtime.applied() as device:
         table = lift_detections_table(load_lifter(lifter_checkpoint, device), raw_detections, context.partition_key)
     first = table.iloc[::NUM_JOINTS]  # one row per detection
@@ -151,7 +156,7 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
 
 @sequence_asset(
     "cameras",
-    code_version="9",
+    code_version="10",
     check_specs=[
         dg.AssetCheckSpec("cameras_valid", asset="extrinsics", blocking=True,
                           description="finite positive focal, principal point inside, right-handed rotations"),
@@ -159,8 +164,12 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
                           description="each focal gives a 10-140 deg horizontal field of view"),
         dg.AssetCheckSpec("rig_geometry", asset="extrinsics", blocking=True,
                           description="cameras above the floor, each with most people in front and in its image"),
-        dg.AssetCheckSpec("focal_constrained", asset="extrinsics",
-                          description="every focal determined to 5 % (relative std of the bundle adjustment; warns)"),
+        dg.AssetCheckSpec("views_agree", asset="extrinsics", blocking=True,
+                          description="every view agrees with the people the other views triangulate (after any "
+                                      "repair) and its focal is not at a bound of the plausible range"),
+        dg.AssetCheckSpec("focal_constrained", asset="extrinsics", blocking=True,
+                          description="every focal determined to 5 % (relative std of the bundle adjustment): a looser "
+                                      "one is as likely as not more than 5 % off"),
         dg.AssetCheckSpec("people_plausible", asset="extrinsics", blocking=True,
                           description="the people triangulated with these cameras have their lifted size (0.8-1.25)"),
         dg.AssetCheckSpec("floor_found", asset="extrinsics",
@@ -174,16 +183,23 @@ def extrinsics(
     detections: pd.DataFrame,
     intrinsics: pd.DataFrame,
     views: pd.DataFrame,
+    known_cameras: pd.DataFrame,
 ):
     """The calibrated cameras: rotations from aligned lifted poses, translations, focal lengths refined (and
-    recovered where single views could not observe them) by a multi-view bundle adjustment; world Z up, floor
-    at z = 0, metric scale from the people's heights."""
+    recovered where single views could not observe them) by a multi-view bundle adjustment, every view checked
+    against the people the others triangulate (and placed again where it disagrees); world Z up, floor at z = 0,
+    metric scale from the people's limbs. A capture's known cameras are used as given (all views known) or as
+    anchors (some views: the world is theirs); they enter as pinholes (their detections were undistorted)."""
     start = time.perf_counter()
     dense, lifted = _calibration_inputs(detections)
+    known = {v: pinhole(c) for v, c in cameras_by_view(known_cameras).items()} if len(known_cameras) else {}
+    if known:
+        context.log.info(f"known cameras of views {sorted(known)}: "
+                         + ("used as given" if len(known) == len(views) else "the others calibrated around them"))
     with _single_threaded_blas():
         estimates = intrinsics_from_table(intrinsics)
         result = estimate_extrinsics(dense, lifted, estimates, config.to_library(),
-                                     view_names=_view_names(views, len(estimates)))
+                                     view_names=_view_names(views, len(estimates)), known=known)
     table = cameras_to_table(result.cameras, context.partition_key)
     seconds = time.perf_counter() - start
     floor = result.diagnostics.floor
@@ -206,19 +222,23 @@ def extrinsics(
         mismatched_detections=int(result.diagnostics.mismatched_detections),
         regroup=result.diagnostics.regroup,
         regroup_detections=" -> ".join(map(str, result.diagnostics.regroup_detections)),
+        scale_factor=float(result.diagnostics.scale_factor),
+        views_repaired=", ".join(map(str, np.flatnonzero(per_view["reregistered"].to_numpy()))) or "none",
     )
     rig = check_rig_geometry(table, people, floor_known=floor is not None)
+    views_agree = check_views_agree(per_view, _view_names(views, len(table)))
     for name, report in (("cameras_valid", check_cameras_valid(table)), ("focal_plausible", check_focal_plausible(table)),
-                         ("rig_geometry", rig),
+                         ("rig_geometry", rig), ("views_agree", views_agree),
                          ("people_plausible", check_body_size(result.diagnostics.body_size_ratio))):
         yield check_result(context, name, report)
-    yield check_result(context, "focal_constrained", _focal_constrained_report(per_view),
-                       severity=dg.AssetCheckSeverity.WARN)
+    yield check_result(context, "focal_constrained", _focal_constrained_report(per_view, views))
     yield check_result(context, "floor_found", _floor_report(result.diagnostics, config.align_floor),
                        severity=dg.AssetCheckSeverity.WARN)
 
 
 def _floor_report(diagnostics, asked: bool) -> CheckReport:
+    if diagnostics.world_frame == "known_cameras":
+        return CheckReport(True, "the known cameras set the world frame (no floor alignment)", {}, checked=1)
     if not asked:
         return CheckReport.nothing_to_check("the floor alignment is switched off (align_floor: false)")
     floor = diagnostics.floor
@@ -232,16 +252,22 @@ def _floor_report(diagnostics, asked: bool) -> CheckReport:
                         "standing_groups": float(floor.standing_groups)}, checked=1)
 
 
-def _focal_constrained_report(per_view: pd.DataFrame) -> CheckReport:
+def _focal_constrained_report(per_view: pd.DataFrame, views: pd.DataFrame) -> CheckReport:
+    """Every focal determined to 5 %; a failure names the loose views and the ways out."""
     if per_view.empty:
         return CheckReport.nothing_to_check("no view")
+    names = _view_names(views, len(per_view))
+    label = lambda v: f"view {v} ({names[v]})" if names else f"view {v}"  # noqa: E731
     loose = per_view[per_view["focal_status"] != "ok"]
+    problems = [f"{label(r.view)}: focal {r.focal_px:.0f} px "
+                + (f"+- {100 * r.focal_rel_std:.0f} %" if np.isfinite(r.focal_rel_std)
+                   else f"undetermined ({r.bundle_status.replace('_', ' ')})") for r in loose.itertuples()]
     return CheckReport(
         loose.empty,
-        "every focal is determined to 5 %" if loose.empty else "; ".join(
-            f"view {r.view}: focal {r.focal_px:.0f} px +- {100 * r.focal_rel_std:.0f} % (too few matched people, "
-            "or people who hardly move?)"
-            for r in loose.itertuples()),
-        {"max_focal_rel_std": float(per_view["focal_rel_std"].max())},
+        "every focal is determined to 5 %" if loose.empty else "; ".join(problems)
+        + ": the people do not determine these focal lengths to 5 % (too few frames, people who hardly move, or a "
+          "camera far from the others). Film people moving through the shared field of view for longer, give the "
+          "known cameras of these views (--cameras with --known-views), or leave them out (--drop-view)",
+        {"max_focal_rel_std": float(per_view["focal_rel_std"].replace(np.inf, np.nan).max())},
         checked=len(per_view),
     )

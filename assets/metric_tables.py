@@ -12,13 +12,13 @@ from assets.settings import BodyFitSettings
 from assets.checks import latest_check_outcomes
 from assets.common import png_metadata, sequence_asset, table_output
 from evaluation.association_metrics import associate_tables, association_metric_table
-from evaluation.body_metrics import pipeline_body_table
+from evaluation.body_metrics import PIPELINE_METHOD, pipeline_body_table
 from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
 from evaluation.rig_plot import plot_rig_comparison
 from evaluation.sequence_metrics import sequence_metric_table
 from humancal.camera import cameras_from_table
-from humancal.inputs import sequence_fps
+from humancal.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
 from humancal.tables import empty_table
 from resources.body_model import BodyModelResource
@@ -26,7 +26,7 @@ from resources.datasets import DatasetsResource
 from resources.torch import TorchResource
 
 
-@sequence_asset("metrics", code_version="15")
+@sequence_asset("metrics", code_version="16")
 def metric_tables(
     context: dg.AssetExecutionContext,
     config: BodyFitSettings,
@@ -78,6 +78,10 @@ def metric_tables(
         parts.append(camera_metrics_table(spec.dataset, spec.sequence, estimated, gt,
                                           raw_detections if identified else None, gt_associations if identified else None,
                                           failed_checks=failed))
+        if not identified and len(refined_cameras):  # a capture with reference cameras: the refined rig's rows too
+            parts.append(camera_metrics_table(spec.dataset, spec.sequence, cameras_from_table(refined_cameras), gt,
+                                              method=PIPELINE_METHOD[body_fit_regime(spec, config.cameras)],
+                                              failed_checks=failed))
         if identified:  # who is who, against the true identities (the association itself never reads them)
             # the association with the true cameras (evaluation only), once for the association and body rows
             dense, lifted = lifted_from_table(detections)
@@ -89,7 +93,7 @@ def metric_tables(
                 gt_poses3d=gt_poses3d, gt_cameras=gt, failed_checks=failed, gt_cameras_association=with_true_cameras))
             with torch_runtime.applied():
                 parts.append(pipeline_body_table(
-                    spec, body=body_model.get(), regime=config.cameras, fps=sequence_fps(spec)[0],
+                    spec, body=body_model.get(), regime=body_fit_regime(spec, config.cameras), fps=sequence_fps(spec)[0],
                     fitted_motions=fitted_motions, refined_cameras=cameras_from_table(refined_cameras),
                     fit_seconds=latest_fit_seconds(context.instance, context.partition_key),
                     associations=associations, skeletons3d=skeletons3d, lifted_detections=detections,

@@ -127,6 +127,10 @@ class ExtrinsicsSettings(dg.Config):
     mismatch_rounds: int = library_field(_E, "mismatch_rounds")
     regroup_max_frames: int = library_field(_E, "regroup_max_frames")
     regroup_min_gain: float = library_field(_E, "regroup_min_gain")
+    repair_views: bool = library_field(_E, "repair_views")
+    scale_from_limbs: bool = library_field(_E, "scale_from_limbs")
+    max_loo_sigma: float = library_field(_E, "max_loo_sigma")
+    min_explained_fraction: float = library_field(_E, "min_explained_fraction")
 
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""

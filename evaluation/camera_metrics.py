@@ -8,6 +8,9 @@ Protocol:
 * ``focal_error_pct``: ``100 |f_est - f_gt| / f_gt`` with ``f = sqrt(fx fy)``.
 * ``position_error_mm``: distance between the aligned estimated centre and the true centre.
 * ``angle_error_deg``: geodesic angle between the aligned estimated rotation and the true one.
+* ``scale_error_pct``: how much larger the estimated world is than the true one, ``100 (1 / s - 1)`` with ``s`` the
+  scale of that similarity (negative: too small). The other figures are measured after the alignment, which hides
+  the scale; this one shows it (one row for the rig, no per-view rows).
 * ``reprojection_error_px``: each ground-truth person (identities from the ground-truth associations: evaluation
   only) is triangulated per frame from all its detections with the estimated cameras (confidence-weighted DLT,
   :func:`humancal.geometry.triangulation.triangulate_dlt`) and reprojected; the mean pixel distance over the
@@ -37,7 +40,7 @@ from humancal.geometry.rotations import rotation_distance_deg
 from humancal.geometry.triangulation import reprojection_errors_px, triangulate_dlt
 from humancal.long_tables import unique_rows
 
-__all__ = ["CameraErrors", "camera_errors", "centred_principal_point_floor", "reprojection_errors_per_view", "camera_metrics", "camera_metrics_table"]
+__all__ = ["CameraErrors", "camera_errors", "scale_error_pct", "centred_principal_point_floor", "reprojection_errors_per_view", "camera_metrics", "camera_metrics_table"]
 
 METHOD = "init"
 
@@ -64,6 +67,12 @@ def camera_errors(estimated: list[Camera], ground_truth: list[Camera]) -> Camera
                                 np.stack([g.R_cam_from_world for g in ground_truth]))
     return CameraErrors(focal_error_pct=100.0 * np.abs(f_est - f_gt) / f_gt, position_error_mm=pos,
                         angle_error_deg=ang, alignment=sim)
+
+
+def scale_error_pct(alignment: Similarity) -> float:
+    """How much larger (%) the estimated world is than the true one, from the similarity that aligns it onto the
+    truth (``x_true = s R x_est + t``): ``100 (1 / s - 1)``."""
+    return float(100.0 * (1.0 / alignment.scale - 1.0))
 
 
 def centred_principal_point_floor(ground_truth: list[Camera], points_world_m: np.ndarray) -> dict[str, np.ndarray]:
@@ -164,11 +173,13 @@ def camera_metrics(
 
     Returns:
         Rows ``focal_error_pct``, ``position_error_mm``, ``angle_error_deg`` (and ``reprojection_error_px``,
-        ``reprojection_error_gt_cameras_px``), each as the mean over views (``view`` None) and per view.
+        ``reprojection_error_gt_cameras_px``), each as the mean over views (``view`` None) and per view, and
+        ``scale_error_pct`` (the rig's).
     """
     err = camera_errors(estimated, ground_truth)
     rows = (_rows("focal_error_pct", err["focal_error_pct"], "%") + _rows("position_error_mm", err["position_error_mm"], "mm")
-            + _rows("angle_error_deg", err["angle_error_deg"], "deg"))
+            + _rows("angle_error_deg", err["angle_error_deg"], "deg")
+            + [MetricRow("scale_error_pct", scale_error_pct(err["alignment"]), "%")])
     if detections is not None and associations is not None:
         rows += _rows("reprojection_error_px", reprojection_errors_per_view(estimated, detections, associations), "px")
         rows += _rows("reprojection_error_gt_cameras_px",

@@ -22,6 +22,7 @@ __all__ = [
     "check_focal_plausible",
     "check_rig_geometry",
     "check_body_size",
+    "check_views_agree",
 ]
 
 
@@ -215,7 +216,58 @@ def check_body_size(body_size_ratio: float, allowed: tuple[float, float] = (0.8,
     low, high = allowed
     if not low <= body_size_ratio <= high:
         return CheckReport(False, f"the people triangulated with these cameras are {body_size_ratio:.2f} times the "
-                                  f"size the lifter gives them (allowed {low}-{high}): the cameras are wrong",
+                                  f"size the lifter gives them (allowed {low}-{high}): the cameras are wrong, or the "
+                                  "detections are not what they were declared (skeleton, image size)",
                            figures, checked=1)
     return CheckReport(True, f"the triangulated people are {body_size_ratio:.2f} times their lifted size", figures,
                        checked=1)
+
+
+def _view_label(v: int, names) -> str:
+    return f"view {v} ({names[v]})" if names is not None and v < len(names) else f"view {v}"
+
+
+def _untrusted(row, names) -> str | None:
+    """Why one view of a calibration's per-view table is not to be trusted (None: it is)."""
+    label = _view_label(int(row.view), names)
+    if row.bundle_status == "focal_at_bound":
+        return (f"{label}: its focal length ended at the end of the plausible range ({row.focal_px:.0f} px): the "
+                "people do not determine it")
+    if row.bundle_status in ("behind_camera", "no_inliers"):
+        return f"{label}: the bundle adjustment ended with {row.bundle_status.replace('_', ' ')}"
+    if row.agreement == "disagrees":
+        return f"{label} disagrees with the other views: {row.agreement_reason}"
+    return None
+
+
+def check_views_agree(per_view: pd.DataFrame, view_names=None) -> CheckReport:
+    """Every view of a calibration agrees with the people the other views triangulate
+    (:func:`humancal.calibration.view_agreement.view_agreement`) and its focal length is not at a bound of its range
+    (how well the focal lengths are determined is the ``focal_constrained`` check's).
+
+    Args:
+        per_view: :attr:`humancal.calibration.ExtrinsicsDiagnostics.per_view` (columns ``view``, ``focal_px``,
+            ``focal_rel_std``, ``bundle_status``, ``agreement``, ``agreement_reason``).
+        view_names: the views' names in view order, for the message (None: numbers only).
+
+    Returns:
+        A failed report names every view not to trust, the figure and the way out.
+    """
+    if per_view.empty:
+        return CheckReport.nothing_to_check("no view")
+    problems = [p for p in (_untrusted(r, view_names) for r in per_view.itertuples()) if p]
+    unchecked = per_view.loc[per_view["agreement"] == "unchecked", "view"].astype(int).tolist()
+    figures = {"views_disagreeing": float((per_view["agreement"] == "disagrees").sum()),
+               "views_unchecked": float(len(unchecked)),
+               "max_loo_error_sigma": float(np.nanmax(per_view["loo_error_sigma"])) if per_view[
+                   "loo_error_sigma"].notna().any() else float("nan"),
+               "max_focal_rel_std": float(per_view["focal_rel_std"].replace(np.inf, np.nan).max())}
+    if problems:
+        return CheckReport(False, "; ".join(problems) + ". Leave the view out (--drop-view when adding the capture, "
+                           "drop_views in its datasets entry), film people moving through the shared field of view "
+                           "for longer, or give its known camera (--cameras with --known-views)", figures,
+                           checked=len(per_view))
+    note = (f"; {', '.join(_view_label(v, view_names) for v in unchecked)} could not be compared with two others"
+            if unchecked else "")
+    return CheckReport(True, f"all {len(per_view)} views agree with the people the others place{note}", figures,
+                       checked=len(per_view))

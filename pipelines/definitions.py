@@ -9,6 +9,7 @@ from assets.baselines import gt_camera_triangulation
 from assets.benchmark import build_benchmark_assets
 from assets.bodies import body_fit
 from assets.calibration import detections, extrinsics, intrinsics
+from assets.final_cameras import final_cameras
 from assets.lifter import build_lifter_assets
 from assets.method_tables import method_tables
 from assets.metric_tables import metric_tables
@@ -27,7 +28,7 @@ from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFa
 from resources.torch import TorchResource
 
 PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, association,
-                       body_fit, metric_tables, method_tables]
+                       body_fit, final_cameras, metric_tables, method_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
 SHARED_ASSETS = [sequence_registry, mocap_clips]

@@ -23,9 +23,10 @@ Steps (each in its own module):
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from functools import partial
 
@@ -36,6 +37,7 @@ from humancal.calibration.blind_views import blind_views, other_views_focal, res
 from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
 from humancal.calibration.floor import NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
+from humancal.calibration.known_cameras import anchor_to_known, known_rig_estimate, with_known_intrinsics
 from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs, spread_groups
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.regroup import regroup_with_cameras
@@ -43,6 +45,14 @@ from humancal.calibration.rotation_consensus import average_rotations, pairwise_
 from humancal.calibration.translations import root_positions, solve_focals_translations
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted, hip_midpoints
 from humancal.calibration.view_graph import check_view_graph
+from humancal.calibration.view_repair import (
+    RepairInputs,
+    ViewRepair,
+    agreement_of,
+    cameras_of,
+    check_and_repair_views,
+)
+from humancal.calibration.world_scale import people_scale_factor
 from humancal.camera import Camera
 from humancal.detections import DenseDetections
 from humancal.keypoints import JOINT_INDEX
@@ -232,9 +242,10 @@ def _initial_points(groups, lifted, roots_T, view, R, t):
     return pts
 
 
-def _world_frame(ba, V, config):
+def _world_frame(ba, V, config, align_floor: bool = True):
     """Step 5: the bundle adjustment's cameras and people moved to the floor's frame (Z up, floor at z = 0), or
-    left in camera 0's frame when ``config.align_floor`` is off or the people give no floor (said in a warning).
+    left in camera 0's frame when ``config.align_floor`` (or ``align_floor``: off when known cameras set the world)
+    is off or the people give no floor (said in a warning).
 
     Returns:
         ``(R_final, t_final, floor, floor_problem, people)``: the cameras' rotations and translations, the
@@ -243,7 +254,7 @@ def _world_frame(ba, V, config):
     """
     R_final, t_final = ba.R_cam_from_world, ba.t_cam_from_world_m
     floor, floor_problem = None, None
-    if config.align_floor:
+    if config.align_floor and align_floor:
         # standing from the reconstructed (triangulated) keypoints: body-internal, camera-free
         standing = standing_score(ba.points_world_m)
         with _stage("floor alignment"):
@@ -269,6 +280,7 @@ def estimate_extrinsics(
     config: ExtrinsicsConfig | None = None,
     *,
     view_names: Sequence[str] | None = None,
+    known: Mapping[int, Camera] | None = None,
 ) -> ExtrinsicsEstimate:
     """Extrinsics of all views, with focal lengths refined (and recovered where single views fail).
 
@@ -280,6 +292,9 @@ def estimate_extrinsics(
             one per view in view order (``status`` ``"no_upright"`` allowed: its focal is recovered here).
         config: settings; defaults to :class:`ExtrinsicsConfig`.
         view_names: the views' names in view order (e.g. camera folders), used in the error messages.
+        known: cameras the user knows, by view (pinholes, :mod:`.known_cameras`): all views known, they are
+            returned as given with their agreement with the people; some, the others are calibrated around them
+            and the world is theirs.
 
     Returns:
         :class:`ExtrinsicsEstimate`: cameras in the world frame (Z up, floor z = 0 unless ``align_floor`` is off
@@ -297,6 +312,11 @@ def estimate_extrinsics(
     if view_names is not None and len(view_names) != V:
         raise ValueError(f"view_names must name the {V} views in order, got {len(view_names)} names")
     view_names = None if view_names is None else [str(n) for n in view_names]
+    known = dict(known or {})
+    if sorted(known) == list(range(V)):
+        return known_rig_estimate(detections, lifted, [known[v] for v in range(V)], config)
+    if known:
+        intrinsics = with_known_intrinsics(intrinsics, known)
     rng = np.random.default_rng(config.seed)
     timings: dict[str, float] = {}
 
@@ -434,7 +454,22 @@ def estimate_extrinsics(
     timings["bundle"] = time.perf_counter() - clock - timings.get("regroup", 0.0)  # the adjustments alone
 
     clock = time.perf_counter()
-    R_final, t_final, floor, floor_problem, people = _world_frame(ba, V, config)
+    adjust_any = _adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config)
+    with _stage("view agreement"):
+        ba, groups, repair = _check_views(ba, groups, detections, lifted_as_given, pp, intrinsics, bounds, adjust_any,
+                                          config)
+    _require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
+                    "view repair")
+    timings["views"] = time.perf_counter() - clock
+    scale, _ = people_scale_factor(ba.points_world_m) if config.scale_from_limbs else (1.0, 0)
+    ba = dataclasses.replace(ba, t_cam_from_world_m=scale * ba.t_cam_from_world_m,
+                             points_world_m=scale * ba.points_world_m)
+    if known:  # the known cameras set the world (and, two or more, its scale)
+        with _stage("anchoring to the known cameras"):
+            ba = anchor_to_known(ba, known, adjust_any, groups)
+
+    clock = time.perf_counter()
+    R_final, t_final, floor, floor_problem, people = _world_frame(ba, V, config, align_floor=not known)
     timings["floor"] = time.perf_counter() - clock
 
     cameras = _cameras(ba, R_final, t_final, pp, intrinsics)
@@ -457,6 +492,13 @@ def estimate_extrinsics(
         "bundle_status": ba.view_status,
         "reprojection_rms_px": ba.reprojection_rms_px,
         "rotation_edges": edges,
+        "agreement": repair.final["verdict"].to_numpy(),
+        "agreement_reason": repair.final["reason"].to_numpy(),
+        "loo_error_sigma": repair.final["loo_median_sigma"].to_numpy(),
+        "people_loo_sigma": repair.final["people_loo_sigma"].to_numpy(),
+        "explained_fraction": repair.final["explained_fraction"].to_numpy(),
+        "first_agreement": repair.first["verdict"].to_numpy(),
+        "reregistered": np.isin(np.arange(V), repair.reregistered) & repair.kept,
     })
     bad = per_view[per_view["focal_status"] != "ok"]
     if len(bad):
@@ -472,15 +514,42 @@ def estimate_extrinsics(
         "group": np.repeat(np.arange(len(groups)), [len(g) for g in groups]),
     })
     diagnostics = ExtrinsicsDiagnostics(per_view, pair_table, group_table, floor, ba.inlier_fraction, timings,
-                                        world_frame="floor" if floor is not None else "camera_0",
+                                        world_frame=("known_cameras" if known else "floor" if floor is not None
+                                                     else "camera_0"),
                                         floor_problem=floor_problem, people_world_m=people,
                                         body_size_ratio=_body_size_ratio(ba.points_world_m, lifted, groups),
                                         mismatched_detections=dropped, regroup=regroup_status,
-                                        regroup_detections=regroup_counts)
+                                        regroup_detections=regroup_counts, scale_factor=scale)
     logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})
     return ExtrinsicsEstimate(cameras, diagnostics)
+
+
+def _adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config):
+    """The calibration's bundle adjustment as ``adjust(f, R, t, points, groups, hold_views=())``: square pixels, the
+    focal priors and bounds of the calibration, the lifted poses turned into camera frames at ``f``."""
+    def adjust(f, R, t, points, groups, hold_views=()):
+        lifted = (lifted_as_given.in_camera_frame(_K(f, f, pp)[detections.view]) if lifted_as_given.frame == "crop"
+                  else lifted_as_given)
+        return bundle_adjust(
+            detections, lifted, groups, points, f, f, pp, R, t, square_pixels=config.square_pixels,
+            focal_prior_px=f0, focal_prior_rel_std=prior_rel, shape_std_m=config.shape_std_m,
+            group_scale_std=config.person_scale_std, focal_bounds_px=bounds, max_iterations=config.bundle_iterations,
+            hold_views=hold_views)
+
+    return adjust
+
+
+def _check_views(ba, groups, detections, lifted_as_given, pp, intrinsics, bounds, adjust, config):
+    """Every view scored by the people triangulated without it, the disagreeing ones placed again
+    (:mod:`.view_repair`); ``config.repair_views`` off: scored only. Returns (ba, groups, ViewRepair)."""
+    inputs = RepairInputs(detections, lifted_as_given, pp, np.array([(e.width_px, e.height_px) for e in intrinsics]),
+                          bounds, adjust, config.agreement(), config.regroup_max_frames or 150)
+    if not config.repair_views:
+        agreement = agreement_of(cameras_of(ba, inputs), groups, inputs)
+        return ba, groups, ViewRepair(agreement, agreement)
+    return check_and_repair_views(ba, groups, inputs)
 
 
 def _cameras(ba, R_cam_from_world, t_cam_from_world_m, pp, intrinsics) -> list[Camera]:

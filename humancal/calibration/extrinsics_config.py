@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from humancal.calibration.floor import FloorAlignment
+from humancal.calibration.view_agreement import AgreementConfig
 from humancal.camera import Camera
 
 __all__ = ["ExtrinsicsConfig", "ExtrinsicsDiagnostics", "ExtrinsicsEstimate"]
@@ -67,6 +68,17 @@ class ExtrinsicsConfig:
             runs on those groups when they hold at least ``regroup_min_gain`` times the detections of the first
             ones (and more); 0 turns this off. Not with two views (see ``ExtrinsicsDiagnostics.regroup``).
         regroup_min_gain: see ``regroup_max_frames``.
+        repair_views: after the bundle adjustment every view is scored by the people triangulated without it
+            (:mod:`~humancal.calibration.view_agreement`); when on, the views that disagree are placed again
+            against the people of the views that agree and the rig adjusted again
+            (:mod:`~humancal.calibration.view_repair`); when off, they are only scored.
+        scale_from_limbs: after the bundle adjustment, the world is scaled so that the people's median summed limb
+            length is a reference adult's (:mod:`~humancal.calibration.world_scale`); off: the scale the lifted
+            poses' sizes give.
+        max_loo_sigma: a view disagrees when its keypoints reproject (median) more than this many keypoint stds
+            (2 % of the person's image extent) from the people the other views triangulate.
+        min_explained_fraction: a view disagrees when fewer of its detections than this fraction lie near a person
+            the other views triangulate.
     """
 
     rotation_threshold_deg: float = 10.0
@@ -95,6 +107,14 @@ class ExtrinsicsConfig:
     mismatch_rounds: int = 2
     regroup_max_frames: int = 150
     regroup_min_gain: float = 1.0
+    repair_views: bool = True
+    scale_from_limbs: bool = True
+    max_loo_sigma: float = 3.0
+    min_explained_fraction: float = 0.75
+
+    def agreement(self) -> AgreementConfig:
+        """The thresholds of the views' agreement."""
+        return AgreementConfig(max_loo_sigma=self.max_loo_sigma, min_explained=self.min_explained_fraction)
 
     def __post_init__(self) -> None:
         if not 0.0 < self.rotation_threshold_deg < 90.0:
@@ -137,7 +157,10 @@ class ExtrinsicsDiagnostics:
             from the other views' median field of view, left to the bundle adjustment)),
             ``bundle_status`` (``"ok"``, ``"focal_at_bound"``, ``"behind_camera"``, ``"no_inliers"``: see
             :class:`~humancal.calibration.multiview_focal.BundleResult`; anything but ``"ok"`` makes the
-            ``focal_status`` ``"poorly_constrained"``), ``reprojection_rms_px``, ``rotation_edges``.
+            ``focal_status`` ``"poorly_constrained"``), ``reprojection_rms_px``, ``rotation_edges``, and the view's
+            agreement with the others (:func:`~humancal.calibration.view_agreement.view_agreement`):
+            ``agreement`` (``"ok"``, ``"disagrees"``, ``"unchecked"``), ``agreement_reason``, ``loo_error_sigma``,
+            ``explained_fraction``, ``first_agreement`` (before any repair) and ``reregistered`` (placed again).
         pairs: one row per view pair: ``view_a``, ``view_b``, ``support``, ``residual_deg`` (disagreement of the
             pair rotation with the averaged rotations; NaN when unused).
         groups: the matched detections used: ``frame``, ``view``, ``det_id``, ``group``.
@@ -158,6 +181,8 @@ class ExtrinsicsDiagnostics:
             matching's groups are kept: geometry adds one epipolar line, which a wrong pair near it passes).
         regroup_detections: detections in the first groups and in the groups found again (both after choosing at
             most ``max_groups``; (0, 0) when off).
+        scale_factor: the factor the world was scaled by after the bundle adjustment so that the people have a
+            reference adult's limbs (1: ``scale_from_limbs`` off, or too few people with all limbs).
         timings_s: seconds per step.
     """
 
@@ -174,6 +199,7 @@ class ExtrinsicsDiagnostics:
     mismatched_detections: int = 0
     regroup: str = "off"
     regroup_detections: tuple[int, int] = (0, 0)
+    scale_factor: float = 1.0
 
 
 @dataclass(frozen=True)

@@ -94,6 +94,7 @@ def _plane_heights(v_c: np.ndarray, fx: np.ndarray, fy: np.ndarray, head_c, ankl
 
 
 def _residuals(params, square, up0, basis, head_c, ankle_c, h, sigmas):
+    params = np.clip(params, -30.0, 30.0)  # log parameters: a trial step far out is a bad step, not an overflow
     fx = np.exp(params[0])
     fy = fx if square else np.exp(params[1])
     k = 1 if square else 2

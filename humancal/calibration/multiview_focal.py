@@ -36,6 +36,7 @@ biased by errors in variables.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -78,7 +79,8 @@ class BundleResult:
         R_cam_from_world: (V, 3, 3) rotations.
         t_cam_from_world_m: (V, 3) translations, metres.
         points_world_m: (G, 23, 3) keypoints of the groups, metres.
-        focal_rel_std: (V,) relative standard deviation of the focal lengths (inverse Schur complement).
+        focal_rel_std: (V,) relative standard deviation of the focal lengths (inverse Schur complement); inf for
+            a focal at a bound of its range (undetermined), NaN for a held view.
         reprojection_rms_px: (V,) RMS reprojection error of the inlier keypoints per view, pixels.
         inlier_fraction: fraction of keypoint observations within the Huber threshold.
         iterations: LM iterations run.
@@ -86,8 +88,8 @@ class BundleResult:
         group_scale: (G,) size of each group's lifted poses relative to its keypoints (``q``; ones when the
             scales were not estimated).
         view_status: (V,) per view ``"ok"``, ``"focal_at_bound"`` (the focal ended within 2 % of a bound of
-            its plausible range), ``"behind_camera"`` (most of its keypoints behind it) or ``"no_inliers"`` (no
-            keypoint within the Huber threshold).
+            its plausible range), ``"behind_camera"`` (most of its keypoints behind it), ``"no_inliers"`` (no
+            keypoint within the Huber threshold) or ``"held"`` (in ``hold_views``).
         rejected_steps: steps refused (cost increase, non-finite values or a singular system).
         cost: the final robust cost (comparable between runs on the same groups and priors).
         detection_error_sigma: (S,) per detection of the groups (the rows of ``np.concatenate(groups)``, in that
@@ -155,6 +157,7 @@ def bundle_adjust(
     max_iterations: int = 40,
     tolerance: float = 1e-6,
     camera_tolerance: float = 2e-5,
+    hold_views: Sequence[int] = (),
 ) -> BundleResult:
     """Refine focal lengths, rotations, translations and the groups' keypoints (see the module docstring).
 
@@ -185,6 +188,8 @@ def bundle_adjust(
             distance from the world origin changed by more than this (the points and sizes can crawl on for
             tens of iterations at a relative cost decrease of 1e-5 while the cameras move by less than 1e-5;
             along a flat valley the cameras still move, and it does not fire). 0 turns it off.
+        hold_views: views whose focal length and pose stay as given (e.g. views left out of the groups while the
+            others are adjusted); the first view not held keeps its pose (the world frame) instead of view 0.
 
     Returns:
         :class:`BundleResult` (the last state that lowered the cost).
@@ -257,7 +262,12 @@ def bundle_adjust(
     R0 = R_init.copy()
     log_q = np.zeros(G)
     free = np.ones((V, nc), bool)
-    free[0, nf:] = False
+    held = np.zeros(V, bool)
+    held[list(hold_views)] = True
+    if held.all():
+        raise ValueError("bundle_adjust: every view is held; nothing to adjust")
+    free[held] = False
+    free[int(np.flatnonzero(~held)[0]), nf:] = False  # the world frame
 
     lam, converged, it, rejected, still = 1e-3, False, 0, 0, 0
     scale_m = max(float(np.median(np.linalg.norm(t_init, axis=1))), 1e-3)
@@ -292,12 +302,16 @@ def bundle_adjust(
             break
     f_std = _focal_std(prob, cams, R0, X, log_q, free, w_obs)
     fx, fy, R, t = _unpack(prob, cams, R0)
+    status = _view_status(prob, np.log(fx), log_bounds, None, None)
+    # a focal at a bound of its range is not determined by the data (the bounded parameterization's derivative
+    # vanishes there, and with it the std it would report): undetermined, not +- 0
+    f_std = np.where(status == "focal_at_bound", np.inf, np.where(held, np.nan, f_std))
     r_obs, _, _, _, (_, _, _, _, P) = _residuals(prob, cams, R0, X, log_q)
     err_px = np.linalg.norm(r_obs / prob.o_w[:, None], axis=1)
     inl = w_obs >= 1.0
     rms = np.array([np.sqrt(np.mean(err_px[(prob.o_view == v) & inl] ** 2)) if np.any((prob.o_view == v) & inl)
                     else np.nan for v in range(V)])
-    status = _view_status(prob, np.log(fx), log_bounds, P[:, 2], inl)
+    status = np.where(held, "held", _view_status(prob, np.log(fx), log_bounds, P[:, 2], inl))
     detection_error = _median_per_detection(err_px / sigma_px[d_idx], d_idx, len(rows))
     logger.info("bundle adjustment: %d groups, %d keypoints, %d iterations (%d steps refused), cost %.4g, rms %s px",
                 G, len(err_px), it, rejected, cost, np.round(rms, 2))
@@ -392,9 +406,12 @@ def _damped_step(prob, Hcc, Hcp, Hpp, gc, gp, lam, cams, R0, X, log_q, huber):
 
 
 def _view_status(prob: _Problem, log_fx, log_bounds, depth_m, inlier) -> np.ndarray:
+    """(V,) status of every view (see :class:`BundleResult`); only the focal bound without ``depth_m``."""
     status = np.full(prob.V, "ok", dtype=object)
     margin = 0.02 * (log_bounds[:, 1] - log_bounds[:, 0])
     status[(log_fx <= log_bounds[:, 0] + margin) | (log_fx >= log_bounds[:, 1] - margin)] = "focal_at_bound"
+    if depth_m is None:
+        return status.astype(str)
     for v in range(prob.V):
         mine = prob.o_view == v
         if not mine.any():

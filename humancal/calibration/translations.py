@@ -378,6 +378,8 @@ def resect_focal_translation(
             P = RX + t
             res = np.linalg.norm(f * P[:, :2] / P[:, 2:3] - x, axis=1)
         res = np.where(P[:, 2] > 0, res, np.inf)
+        if not (np.isfinite(sol).all() and sol[0] > 0):  # no focal: refused below, no NaN weights into LAPACK
+            break
         # algebraic rows are pixel errors times the depth: divide it out, then Huber
         w = np.asarray(weights, dtype=np.float64)[ok] / np.maximum(P[:, 2], 1e-3) ** 2
         w *= np.minimum(1.0, threshold / np.maximum(res, 1e-9))
@@ -389,7 +391,8 @@ def resect_focal_translation(
     def residual(p):
         P = RX + p[1:]
         z = np.maximum(P[:, 2], 1e-3)
-        return ((np.exp(p[0]) * P[:, :2] / z[:, None] - x) * w0[:, None]).ravel()
+        # a trial step far out (log focal beyond +-30) is a bad step, not an overflow warning
+        return ((np.exp(np.clip(p[0], -30.0, 30.0)) * P[:, :2] / z[:, None] - x) * w0[:, None]).ravel()
 
     fit = least_squares(residual, np.r_[np.log(sol[0]), t], loss="huber", f_scale=threshold, x_scale="jac")
     f, t = float(np.exp(fit.x[0])), fit.x[1:]

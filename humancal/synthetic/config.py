@@ -28,8 +28,8 @@ __all__ = [
     "OUT_OF_VIEW_DURATION_S",
 ]
 
-RigKind = Literal["ring", "arc", "h36m"]
-RIG_KINDS: tuple[str, ...] = ("ring", "arc", "h36m")
+RigKind = Literal["ring", "arc", "dome", "h36m"]
+RIG_KINDS: tuple[str, ...] = ("ring", "arc", "dome", "h36m")
 """Camera rig layouts: a full circle, a partial circle, or the four Human3.6M cameras (external data)."""
 Behaviour = Literal["mixed", "seated", "low"]
 BEHAVIOURS: tuple[str, ...] = ("mixed", "seated", "low")
@@ -189,8 +189,10 @@ class SceneConfig:
         num_frames: frames to generate, >= 1.
         fps: frame rate, frames per second (default 30).
         seed: seed of the one ``numpy.random.Generator`` every random choice comes from (>= 0).
-        rig: camera layout: ``"ring"`` (full circle), ``"arc"`` (partial circle, ``arc_span_deg``) or
-            ``"h36m"`` (the Human3.6M cameras, read from the data root).
+        rig: camera layout: ``"ring"`` (full circle), ``"arc"`` (partial circle, ``arc_span_deg``), ``"dome"``
+            (a capture studio: cameras spread over a dome around a small area, from knee height to overhead,
+            each looking at its centre: ``dome_elevation_range_deg``) or ``"h36m"`` (the Human3.6M cameras, read
+            from the data root).
         h36m_subject: which subject's calibration of the Human3.6M rig to use (``"S1"`` .. ``"S11"``).
         focal_range_px: (min, max) focal length fx = fy, pixels, within [500, 2500]; each camera draws one.
             Ignored by the ``"h36m"`` rig, which keeps its measured focal lengths.
@@ -224,6 +226,13 @@ class SceneConfig:
             detects the person then, and the person comes back wherever the motion has meanwhile taken them. A
             spell may overlap the start or the end (someone who enters late or leaves early). In [0, 5]; 0, the
             default, keeps everyone in the capture all along.
+        dome_elevation_range_deg: (min, max) elevation of the ``"dome"`` rig's cameras seen from the aim point,
+            degrees, within [-20, 80]: each camera draws one (0: level with the aim point at mid-body height).
+        far_views: this many cameras (the last ones of the rig) stand ``far_distance_factor`` times farther from
+            the area than the rig places them, with their focal length multiplied by the same factor (a zoom lens
+            across a hall: the people keep their size in the image, the camera is nearly affine). In [0, 4],
+            fewer than ``num_views``; not with ``"h36m"``.
+        far_distance_factor: (min, max) of the far cameras' distance (and focal) factor, within [1.2, 6].
         principal_point_offset_px: each camera's principal point is moved this far from the image centre, pixels,
             in a direction drawn per camera (real rigs: Human3.6M 12-20 px, Shelf 13-52 px). In [0, 200]; 0, the
             default, keeps it at the centre, where the calibration assumes it.
@@ -249,6 +258,9 @@ class SceneConfig:
     camera_pitch_range_deg: tuple[float, float] | None = None
     out_of_view_spells: float = 0.0
     principal_point_offset_px: float = 0.0
+    dome_elevation_range_deg: tuple[float, float] = (-5.0, 55.0)
+    far_views: int = 0
+    far_distance_factor: tuple[float, float] = (2.0, 4.0)
 
     def __post_init__(self) -> None:
         owner = "SceneConfig"
@@ -296,6 +308,11 @@ class SceneConfig:
         _check_range(owner, "out_of_view_spells", self.out_of_view_spells, 0.0, 5.0)
         _check_range(owner, "principal_point_offset_px", self.principal_point_offset_px, 0.0, 200.0)
         _check_range(owner, "arc_span_deg", self.arc_span_deg, 30.0, 330.0)
+        elevation = _check_interval(owner, "dome_elevation_range_deg", self.dome_elevation_range_deg, -20.0, 80.0)
+        _check_range(owner, "far_views", self.far_views, 0, min(4, self.num_views - 1), integer=True)
+        if self.far_views and self.rig == "h36m":
+            raise ValueError("SceneConfig.far_views must be 0 for rig 'h36m' (its cameras are measured ones)")
+        far = _check_interval(owner, "far_distance_factor", self.far_distance_factor, 1.2, 6.0)
         heights = _check_interval(owner, "height_range_m", self.height_range_m, 1.4, 2.0)
         if not isinstance(self.noise, DetectorNoise):
             raise ValueError(f"SceneConfig.noise must be a DetectorNoise, got {type(self.noise).__name__}")
@@ -313,6 +330,8 @@ class SceneConfig:
         object.__setattr__(self, "height_range_m", heights)
         object.__setattr__(self, "distortion_k1_range", k1)
         object.__setattr__(self, "camera_pitch_range_deg", pitch)
+        object.__setattr__(self, "dome_elevation_range_deg", elevation)
+        object.__setattr__(self, "far_distance_factor", far)
         object.__setattr__(self, "fps", float(self.fps))
         object.__setattr__(self, "principal_point_offset_px", float(self.principal_point_offset_px))
 

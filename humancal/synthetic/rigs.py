@@ -25,6 +25,7 @@ __all__ = [
     "intrinsics",
     "make_rig",
     "ring_rig",
+    "dome_rig",
     "h36m_rig",
     "load_h36m_cameras",
     "undistorted_radius",
@@ -219,6 +220,64 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     return cameras
 
 
+def dome_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
+    """Cameras of a capture studio (``"dome"``): spread around the area at evenly spaced azimuths (a quarter
+    spacing of jitter), each at an elevation drawn from ``config.dome_elevation_range_deg`` as seen from its aim
+    point (knee height to overhead), at the distance where the box of the area (plus a body radius, floor to 2 m)
+    spans ``area_fill`` of its binding image half-extent. A camera that would stand lower than 0.3 m above the
+    floor is raised to it along its line of sight's elevation. Lenses as in :func:`ring_rig`.
+
+    Returns:
+        ``config.num_views`` cameras.
+    """
+    num = config.num_views
+    width, height = config.image_size_px
+    spacing = 2 * np.pi / num
+    azimuth = rng.uniform(0, 2 * np.pi) + spacing * (np.arange(num) + rng.uniform(-0.25, 0.25, num))
+    elevation = np.radians(rng.uniform(*config.dome_elevation_range_deg, num))
+    focal = rng.uniform(*config.focal_range_px, num)
+    distorted = config.distortion_k1_range != (0.0, 0.0)
+    k1 = rng.uniform(*config.distortion_k1_range, num) if distorted else np.zeros(num)
+    half_w, half_h = width / (2.0 * focal), height / (2.0 * focal)
+    if distorted:
+        half_w = np.minimum(undistorted_radius(half_w, k1), half_w)
+        half_h = np.minimum(undistorted_radius(half_h, k1), half_h)
+    cameras = []
+    for v in range(num):
+        target = np.array([*rng.normal(0.0, _AIM_JITTER_M, 2), _AIM_HEIGHT_M + rng.normal(0.0, 0.1)])
+        roll = float(rng.normal(0.0, _ROLL_JITTER_DEG))
+        distance = _fit_distance_m(config, float(elevation[v]), (half_w[v], half_h[v]), target)
+        if target[2] + distance * np.sin(elevation[v]) < 0.3:  # not below the floor: raise it to 0.3 m
+            elevation[v] = np.arcsin((0.3 - target[2]) / distance)
+            distance = _fit_distance_m(config, float(elevation[v]), (half_w[v], half_h[v]), target)
+        direction = np.array([np.cos(azimuth[v]) * np.cos(elevation[v]), np.sin(azimuth[v]) * np.cos(elevation[v]),
+                              np.sin(elevation[v])])
+        cameras.append(_camera(focal[v], k1[v], target + distance * direction, target, roll, width, height))
+    return cameras
+
+
+def _far_cameras(cameras: list[Camera], config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
+    """The last ``config.far_views`` cameras moved back along their optical axes to ``far_distance_factor`` times
+    their distance from the area centre (at mid-body height), their focal lengths multiplied by the same factor
+    (no draw when there are none: the other scenes keep their random stream)."""
+    if config.far_views == 0:
+        return cameras
+    factor = rng.uniform(*config.far_distance_factor, config.far_views)
+    moved = list(cameras)
+    centre = np.array([0.0, 0.0, _AIM_HEIGHT_M])
+    for k, v in enumerate(range(len(cameras) - config.far_views, len(cameras))):
+        c = cameras[v]
+        forward = c.R_cam_from_world[2]
+        depth = float(forward @ (centre - c.center_world_m))
+        K = c.K.copy()
+        K[0, 0] *= factor[k]
+        K[1, 1] *= factor[k]
+        center = c.center_world_m - (factor[k] - 1.0) * depth * forward
+        far = Camera.from_center(K, c.R_cam_from_world, center, c.width_px, c.height_px)
+        moved[v] = Camera(far.K, far.R_cam_from_world, far.t_cam_from_world_m, c.width_px, c.height_px, c.distortion)
+    return moved
+
+
 def _camera(
     focal_px: float, k1: float, center: np.ndarray, target: np.ndarray, roll_deg: float, width: int, height: int
 ) -> Camera:
@@ -306,7 +365,8 @@ def h36m_rig(config: SceneConfig) -> list[Camera]:
 
 
 def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
-    """The cameras of ``config.rig`` (see :func:`ring_rig`, :func:`h36m_rig`).
+    """The cameras of ``config.rig`` (see :func:`ring_rig`, :func:`dome_rig`, :func:`h36m_rig`), the last
+    ``config.far_views`` of them moved far back with zoom lenses.
 
     Raises:
         ValueError: unknown rig kind.
@@ -314,6 +374,8 @@ def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     """
     if config.rig in ("ring", "arc"):
         cameras = ring_rig(config, rng)
+    elif config.rig == "dome":
+        cameras = dome_rig(config, rng)
     elif config.rig == "h36m":
         cameras = h36m_rig(config)
         if config.distortion_k1_range != (0.0, 0.0):
@@ -321,7 +383,8 @@ def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
             cameras = [Camera(c.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px,
                               np.array([k, 0.0, 0.0, 0.0, 0.0])) for c, k in zip(cameras, k1)]
     else:
-        raise ValueError(f"SceneConfig.rig={config.rig!r} is unknown; allowed: 'ring', 'arc', 'h36m'")
+        raise ValueError(f"SceneConfig.rig={config.rig!r} is unknown; allowed: 'ring', 'arc', 'dome', 'h36m'")
+    cameras = _far_cameras(cameras, config, rng)
     return _offset_principal_points(cameras, config.principal_point_offset_px, rng)
 
 

@@ -55,6 +55,11 @@ def test_upright_and_focal_constrained_checks_on_no_view():
     assert not _upright_report(_intrinsics(["ok", "ok"], [50, 3])).passed
     per_view = pd.DataFrame({"view": [0, 1], "focal_status": ["ok", "poorly_constrained"],
                              "focal_px": [900.0, 1200.0], "focal_rel_std": [0.01, 0.2]})
-    assert _focal_constrained_report(per_view.iloc[:0]).not_checked
-    report = _focal_constrained_report(per_view)
-    assert not report.passed and "view 1: focal 1200 px +- 20 %" in report.description
+    views = pd.DataFrame({"view": [0, 1], "name": ["left", "right"]})
+    assert _focal_constrained_report(per_view.iloc[:0], views).not_checked
+    report = _focal_constrained_report(per_view, views)
+    assert not report.passed and "view 1 (right): focal 1200 px +- 20 %" in report.description
+    assert "--known-views" in report.description and "--drop-view" in report.description
+    at_bound = per_view.assign(focal_rel_std=[0.01, np.inf], bundle_status=["ok", "focal_at_bound"])
+    assert "view 1 (right): focal 1200 px undetermined (focal at bound)" in _focal_constrained_report(
+        at_bound, views).description  # never "+- 0 %"

@@ -116,9 +116,11 @@ def test_metric_rows_and_table():
     assert value["reprojection_error_px"] == pytest.approx(value["reprojection_error_gt_cameras_px"])
     assert 0.3 < value["reprojection_error_px"] < 2.0
     table = camera_metrics_table("synthetic", "s", rig, rig)
-    assert set(table["method"]) == {"init"} and len(table) == 3 * 4
-    assert str(table["view"].dtype) == "Int32" and table["view"].isna().sum() == 3
-    assert table.groupby("metric")["view"].apply(lambda v: sorted(v.dropna())).tolist() == [[0, 1, 2]] * 3
+    assert set(table["method"]) == {"init"} and len(table) == 3 * 4 + 1  # and the rig's scale_error_pct
+    assert str(table["view"].dtype) == "Int32" and table["view"].isna().sum() == 4
+    per_view = table[table["metric"] != "scale_error_pct"]
+    assert per_view.groupby("metric")["view"].apply(lambda v: sorted(v.dropna())).tolist() == [[0, 1, 2]] * 3
+    assert table.loc[table["metric"] == "scale_error_pct", "value"].abs().max() < 1e-9  # the true rig: no error
     with pytest.raises(ValueError, match="rigs differ"):
         camera_errors(rig[:2], rig)
 

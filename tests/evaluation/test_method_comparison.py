@@ -45,7 +45,7 @@ def test_convention_floor_row_scores_the_best_centred_cameras_without_a_fit():
         config=None, fps=30.0, dense=None, lifted=None, detections=None, associations=None, skeletons3d=None,
         cameras=truth, gt_associations=None, gt_poses3d=poses, gt_cameras=truth, gt_motions=None)
     mean = table[table["view"].isna()].set_index("metric")["value"]
-    assert set(mean.index) == {"focal_error_pct", "position_error_mm", "angle_error_deg"}
+    assert set(mean.index) == {"focal_error_pct", "position_error_mm", "angle_error_deg", "scale_error_pct"}
     assert set(table["method"]) == {"convention_floor"} and table["failed_checks"].isna().all()
     # About 30-36 px off centre at f = 1000 px: the cameras turn by about 2 degrees to make up for it.
     assert 1.0 < mean["angle_error_deg"] < 2.5 and mean["position_error_mm"] > 1.0
