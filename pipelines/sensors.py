@@ -18,12 +18,15 @@ field) and not looked at again until it changes. The inbox folder is ``$HUMANCAL
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 
 import dagster as dg
 
 from pipelines.partitions import SEQUENCES
+
+log = logging.getLogger(__name__)
 
 INBOX_ENV = "HUMANCAL_INBOX"
 
@@ -59,7 +62,9 @@ def register_drop(drop: Path, user_datasets: Path | None = None) -> str:
     key = partition_key(drop.name, sequence)
     if key in load_datasets_config(user_path=user_datasets):
         raise ValueError(f"partition {key} exists; rename the folder or set 'sequence' in its capture.yaml")
-    load_capture(config, sequence)
+    capture = load_capture(config, sequence)
+    for warning in capture.summary.warnings:  # usable but probably wrong: the sensor's log says so
+        log.warning("%s: %s", drop, warning)
     return add_user_sequence(drop.name, sequence, "capture", config.to_options(), user_path=user_datasets).key
 
 

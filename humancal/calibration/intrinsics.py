@@ -285,12 +285,12 @@ def _assemble(view, size, pp, n, vp: VanishingPoint, sol, joints_cam_m, config) 
         vp_rms_px=vp.rms_px,
         rms_px=sol.rms_px,
     )
-    log = logger.warning if ill else logger.info
-    log(
-        "view %d: focal %.0f px (+-%.1f %%%s), tilt %.1f deg, camera %.2f m above the floor, %d/%d inliers",
-        view, sol.fx_px, 100 * sol.focal_rel_uncertainty, ", ILL-CONDITIONED" if ill else "", tilt,
-        estimate.camera_height_m, estimate.num_inliers, n,
-    )
+    # an ill-conditioned single-view focal is no failure: the multi-view step recovers it (and says so if it cannot)
+    uncertainty = (f"+-{100 * sol.focal_rel_uncertainty:.1f} %" if np.isfinite(sol.focal_rel_uncertainty)
+                   else "undetermined")
+    logger.info("view %d: single-view focal %.0f px (%s%s), tilt %.1f deg, camera %.2f m above the floor, %d/%d "
+                "inliers", view, sol.fx_px, uncertainty, "; left to the multi-view step" if ill else "", tilt,
+                estimate.camera_height_m, estimate.num_inliers, n)
     return estimate
 
 
