@@ -26,9 +26,9 @@ __all__ = ["REFERENCE_LIMB_SUM_M", "SCALE_LIMBS", "limb_sums_m", "people_scale_f
 
 REFERENCE_LIMB_SUM_M = 2.61
 """Summed length of the eight limbs of :data:`SCALE_LIMBS` of a reference adult, metres: the median over the CMU
-training subjects (01, 03, 05-13; each subject's median over its frames, 2.54-2.63 m) of the canonical keypoints of
-their mocap retargeted onto anny, whose standing heights are 1.63-1.71 m (median 1.70 m). Recomputed by
-``tests/humancal/calibration/test_world_scale.py`` when the data root has the CMU mocap."""
+training subjects of the lifter (01, 03, 05-13) of the sum of each limb's median length over the subject's frames
+(2.58-2.63 m; the canonical keypoints of their mocap retargeted onto anny), standing 1.65-1.71 m tall (median
+1.70 m). Measured by ``python scripts/reference_limbs.py`` (2.616 m)."""
 
 SCALE_LIMBS: tuple[tuple[int, int], ...] = tuple((JOINT_INDEX[a], JOINT_INDEX[b]) for a, b in (
     ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("right_hip", "right_knee"), ("right_knee", "right_ankle"),
