@@ -2,7 +2,6 @@
 skeletons, without ground truth (the paper's III-C; ``docs/association.md``)."""
 
 import tempfile
-import time
 from pathlib import Path
 
 import dagster as dg

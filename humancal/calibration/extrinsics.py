@@ -45,17 +45,10 @@ from humancal.calibration.rotation_consensus import average_rotations, pairwise_
 from humancal.calibration.translations import root_positions, solve_focals_translations
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted, hip_midpoints
 from humancal.calibration.view_graph import check_view_graph
-from humancal.calibration.view_repair import (
-    RepairInputs,
-    ViewRepair,
-    agreement_of,
-    cameras_of,
-    check_and_repair_views,
-)
-from humancal.calibration.world_scale import people_scale_factor
+from humancal.calibration.view_repair import RepairInputs, calibration_adjuster, check_and_repair_views
+from humancal.calibration.world_scale import body_size_ratio, people_scale_factor
 from humancal.camera import Camera
 from humancal.detections import DenseDetections
-from humancal.keypoints import JOINT_INDEX
 from humancal.lifter.pose_cues import standing_score
 
 __all__ = ["estimate_extrinsics"]
@@ -186,26 +179,6 @@ def _best_start(adjust, f, t, points, unseen, diag, bounds, detections, lifted, 
         if cost < best[0]:
             best = (cost, f_s, t_s, points_s, f"a {fov:.0f} degree diagonal field of view")
     return best[1], best[2], best[3], best[4]
-
-
-_LIMBS = np.array([[JOINT_INDEX[a], JOINT_INDEX[b]] for a, b in (
-    ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("right_hip", "right_knee"), ("right_knee", "right_ankle"),
-    ("left_shoulder", "left_elbow"), ("left_elbow", "left_wrist"), ("right_shoulder", "right_elbow"),
-    ("right_elbow", "right_wrist"))])
-
-
-def _body_size_ratio(points_world_m, lifted, groups) -> float:
-    """Median over the groups of (sum of triangulated limb lengths) / (median over its detections of the same sum
-    in the lifted poses)."""
-    def limbs(joints):  # (..., 23, 3) -> (...,) summed limb lengths
-        return np.linalg.norm(joints[..., _LIMBS[:, 0], :] - joints[..., _LIMBS[:, 1], :], axis=-1).sum(-1)
-
-    triangulated = limbs(points_world_m)
-    lifted_size = np.array([np.nanmedian(limbs(lifted.joints_cam_m[g])) for g in groups])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = triangulated / lifted_size
-    ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
-    return float(np.median(ratio)) if len(ratio) else float("nan")
 
 
 def _regroup(ba, groups, detections, lifted_as_given, pp, intrinsics, config, rng):
@@ -454,10 +427,12 @@ def estimate_extrinsics(
     timings["bundle"] = time.perf_counter() - clock - timings.get("regroup", 0.0)  # the adjustments alone
 
     clock = time.perf_counter()
-    adjust_any = _adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config)
+    adjust_any = calibration_adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config)
     with _stage("view agreement"):
-        ba, groups, repair = _check_views(ba, groups, detections, lifted_as_given, pp, intrinsics, bounds, adjust_any,
-                                          config)
+        inputs = RepairInputs(detections, lifted_as_given, pp,
+                              np.array([(e.width_px, e.height_px) for e in intrinsics]), bounds, adjust_any,
+                              config.agreement(), config.regroup_max_frames or 150)
+        ba, groups, repair = check_and_repair_views(ba, groups, inputs, repair=config.repair_views)
     _require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
                     "view repair")
     timings["views"] = time.perf_counter() - clock
@@ -517,39 +492,13 @@ def estimate_extrinsics(
                                         world_frame=("known_cameras" if known else "floor" if floor is not None
                                                      else "camera_0"),
                                         floor_problem=floor_problem, people_world_m=people,
-                                        body_size_ratio=_body_size_ratio(ba.points_world_m, lifted, groups),
+                                        body_size_ratio=body_size_ratio(ba.points_world_m, lifted, groups),
                                         mismatched_detections=dropped, regroup=regroup_status,
                                         regroup_detections=regroup_counts, scale_factor=scale)
     logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})
     return ExtrinsicsEstimate(cameras, diagnostics)
-
-
-def _adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config):
-    """The calibration's bundle adjustment as ``adjust(f, R, t, points, groups, hold_views=())``: square pixels, the
-    focal priors and bounds of the calibration, the lifted poses turned into camera frames at ``f``."""
-    def adjust(f, R, t, points, groups, hold_views=()):
-        lifted = (lifted_as_given.in_camera_frame(_K(f, f, pp)[detections.view]) if lifted_as_given.frame == "crop"
-                  else lifted_as_given)
-        return bundle_adjust(
-            detections, lifted, groups, points, f, f, pp, R, t, square_pixels=config.square_pixels,
-            focal_prior_px=f0, focal_prior_rel_std=prior_rel, shape_std_m=config.shape_std_m,
-            group_scale_std=config.person_scale_std, focal_bounds_px=bounds, max_iterations=config.bundle_iterations,
-            hold_views=hold_views)
-
-    return adjust
-
-
-def _check_views(ba, groups, detections, lifted_as_given, pp, intrinsics, bounds, adjust, config):
-    """Every view scored by the people triangulated without it, the disagreeing ones placed again
-    (:mod:`.view_repair`); ``config.repair_views`` off: scored only. Returns (ba, groups, ViewRepair)."""
-    inputs = RepairInputs(detections, lifted_as_given, pp, np.array([(e.width_px, e.height_px) for e in intrinsics]),
-                          bounds, adjust, config.agreement(), config.regroup_max_frames or 150)
-    if not config.repair_views:
-        agreement = agreement_of(cameras_of(ba, inputs), groups, inputs)
-        return ba, groups, ViewRepair(agreement, agreement)
-    return check_and_repair_views(ba, groups, inputs)
 
 
 def _cameras(ba, R_cam_from_world, t_cam_from_world_m, pp, intrinsics) -> list[Camera]:

@@ -28,7 +28,7 @@ from humancal.calibration.multiview_focal import BundleResult
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.types import hip_midpoints
 from humancal.calibration.view_agreement import view_agreement
-from humancal.calibration.world_scale import limb_sums_m
+from humancal.calibration.world_scale import body_size_ratio
 from humancal.camera import Camera
 from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
@@ -108,21 +108,8 @@ def known_rig_estimate(detections: DenseDetections, lifted: LiftedPoses, cameras
     group_table = pd.DataFrame({"frame": detections.frame[rows], "view": detections.view[rows],
                                 "det_id": detections.det_id[rows],
                                 "group": np.repeat(np.arange(len(found.groups)), [len(g) for g in found.groups])})
-    K = np.stack([c.K for c in cameras])[detections.view]
-    in_camera = lifted.in_camera_frame(K) if lifted.frame == "crop" else lifted
     diagnostics = ExtrinsicsDiagnostics(
         per_view, pd.DataFrame(columns=["view_a", "view_b", "support", "residual_deg"]), group_table, None,
         float("nan"), world_frame="known_cameras", people_world_m=hip_midpoints(found.points_world_m),
-        body_size_ratio=_size_ratio(found.points_world_m, in_camera, found.groups))
+        body_size_ratio=body_size_ratio(found.points_world_m, lifted, found.groups))
     return ExtrinsicsEstimate(list(cameras), diagnostics)
-
-
-def _size_ratio(points_world_m: np.ndarray, lifted: LiftedPoses, groups: list[np.ndarray]) -> float:
-    """Median over the groups of their triangulated limb sums over their lifted ones (NaN: none measurable)."""
-    if not groups:
-        return float("nan")
-    lifted_size = np.array([np.nanmedian(limb_sums_m(lifted.joints_cam_m[g])) for g in groups])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = limb_sums_m(points_world_m) / lifted_size
-    ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
-    return float(np.median(ratio)) if len(ratio) else float("nan")

@@ -25,16 +25,16 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.calibration.multiview_focal import BundleResult
+from humancal.calibration.multiview_focal import BundleResult, bundle_adjust
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.reregister import reregister_view
 from humancal.calibration.view_agreement import AgreementConfig, isolate_disagreeing_views, view_agreement
-from humancal.camera import Camera
+from humancal.camera import Camera, intrinsic_matrices
 from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
 
-__all__ = ["Adjust", "RepairInputs", "ViewRepair", "agreement_of", "cameras_of", "check_and_repair_views",
-           "people_groups"]
+__all__ = ["Adjust", "RepairInputs", "ViewRepair", "agreement_of", "calibration_adjuster", "cameras_of",
+           "check_and_repair_views", "people_groups"]
 
 logger = logging.getLogger(__name__)
 
@@ -201,9 +201,29 @@ def _repair(ba, groups, isolated: list[int], inputs: RepairInputs):
     return inputs.adjust(f, R, t, all_points, all_groups), all_groups, placed
 
 
-def check_and_repair_views(ba: BundleResult, groups: list[np.ndarray], inputs: RepairInputs
+def calibration_adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config) -> Adjust:
+    """The calibration's bundle adjustment as ``adjust(f, R, t, points, groups, hold_views=())``: square pixels, the
+    focal priors and bounds of the calibration, the lifted poses turned into camera frames at ``f``."""
+    def adjust(f, R, t, points, groups, hold_views=()):
+        lifted = (lifted_as_given.in_camera_frame(intrinsic_matrices(f, f, pp[:, 0], pp[:, 1])[detections.view]) if lifted_as_given.frame == "crop"
+                  else lifted_as_given)
+        return bundle_adjust(
+            detections, lifted, groups, points, f, f, pp, R, t, square_pixels=config.square_pixels,
+            focal_prior_px=f0, focal_prior_rel_std=prior_rel, shape_std_m=config.shape_std_m,
+            group_scale_std=config.person_scale_std, focal_bounds_px=bounds, max_iterations=config.bundle_iterations,
+            hold_views=hold_views)
+
+    return adjust
+
+
+def check_and_repair_views(ba: BundleResult, groups: list[np.ndarray], inputs: RepairInputs, repair: bool = True
                            ) -> tuple[BundleResult, list[np.ndarray], ViewRepair]:
     """Score every view against the others and repair the rig where some disagree (see the module docstring).
+
+    Args:
+        ba, groups: the calibration's bundle adjustment and its groups.
+        inputs: what the repair needs.
+        repair: False: the views are scored, none is placed again.
 
     Returns:
         (bundle result, groups, :class:`ViewRepair`): the repaired ones when the repair was kept, else those given.
@@ -211,7 +231,7 @@ def check_and_repair_views(ba: BundleResult, groups: list[np.ndarray], inputs: R
     cameras = cameras_of(ba, inputs)
     people = people_groups(cameras, inputs)
     first = agreement_of(cameras, groups, inputs, people=people)
-    if not (first["verdict"] == "disagrees").any():
+    if not repair or not (first["verdict"] == "disagrees").any():
         return ba, groups, ViewRepair(first, first)
     isolated, _ = isolate_disagreeing_views(cameras, inputs.detections, groups, inputs.agreement, people, first)
     logger.info("views %s disagree with the others (%s): placing them again against the people of views %s",

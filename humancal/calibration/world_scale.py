@@ -22,7 +22,7 @@ import numpy as np
 
 from humancal.keypoints import JOINT_INDEX
 
-__all__ = ["REFERENCE_LIMB_SUM_M", "SCALE_LIMBS", "limb_sums_m", "people_scale_factor"]
+__all__ = ["REFERENCE_LIMB_SUM_M", "SCALE_LIMBS", "body_size_ratio", "limb_sums_m", "people_scale_factor"]
 
 REFERENCE_LIMB_SUM_M = 2.61
 """Summed length of the eight limbs of :data:`SCALE_LIMBS` of a reference adult, metres: the median over the CMU
@@ -65,3 +65,21 @@ def people_scale_factor(points_world_m: np.ndarray, reference_limb_sum_m: float 
         return 1.0, fewest
     total = sum(float(np.median(lengths[measured[:, k], k])) for k in range(lengths.shape[1]))
     return float(reference_limb_sum_m / total), fewest
+
+
+def body_size_ratio(points_world_m: np.ndarray, lifted, groups) -> float:
+    """Median over the groups of their triangulated limb sums over the median of their detections' lifted ones (about
+    1 for cameras that agree with the lifted people; NaN: nothing measurable).
+
+    Args:
+        points_world_m: (G, 23, 3) the groups' keypoints, metres.
+        lifted: the detections' :class:`~humancal.lifter.LiftedPoses` (any frame: lengths only).
+        groups: G arrays of detection rows.
+    """
+    if not len(groups):
+        return float("nan")
+    lifted_size = np.array([np.nanmedian(limb_sums_m(lifted.joints_cam_m[g])) for g in groups])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = limb_sums_m(points_world_m) / lifted_size
+    ratio = ratio[np.isfinite(ratio) & (ratio > 0)]
+    return float(np.median(ratio)) if len(ratio) else float("nan")
