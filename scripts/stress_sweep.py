@@ -59,12 +59,10 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from sweep_scoring import SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, score_calibration  # noqa: E402,F401
 
 BEHAVIOURS = ("mixed", "mixed", "seated", "low")
 """Scene ``i`` has behaviour ``BEHAVIOURS[i % 4]``."""
-SILENT_FOCAL_PCT, SILENT_ANGLE_DEG = 5.0, 3.0
-"""A view worse than this in a scene that passes every blocking check (``humancal update`` would exit 0) is a silent
-failure."""
 
 
 def _wide_scene(rng: np.random.Generator, index: int, seed: int, views: int | None):
@@ -151,42 +149,8 @@ def _init_worker(lifter_specs: list[str], repair: bool = True, limbs: bool = Tru
     _WORKER["limbs"] = limbs
 
 
-def _checks(cameras, people_m, floor_known: bool, body_size_ratio: float, per_view) -> list[str]:
-    """The blocking checks of the pipeline's ``extrinsics`` asset that these cameras fail."""
-    from humancal.camera import cameras_to_table
-    from humancal.validation import (check_body_size, check_cameras_valid, check_focal_plausible, check_rig_geometry,
-                                     check_views_agree)
-
-    table = cameras_to_table(cameras, "sweep")
-    reports = {"cameras_valid": check_cameras_valid(table), "focal_plausible": check_focal_plausible(table),
-               "rig_geometry": check_rig_geometry(table, people_m, floor_known=floor_known),
-               "people_plausible": check_body_size(body_size_ratio), "views_agree": check_views_agree(per_view)}
-    failed = [name for name, report in reports.items() if not report.passed]
-    return failed + (["focal_constrained"] if (per_view["focal_status"] != "ok").any() else [])
-
-
-def _angles_aligned_with_axes(estimated, truth) -> np.ndarray:
-    """(V,) angle errors, degrees, after the similarity fitted on the centres *and* a point one rig radius ahead on
-    each optical axis. For three views: their triangle of centres alone leaves the alignment's rotation to the
-    triangle's shape error (scene 94 of the sweep: 5.2 deg for each of three views whose relative rotations are
-    within 0.8 deg of the truth); with two views the centres-only alignment already adds these points."""
-    from humancal.calibration.alignment import rig_alignment_points
-    from humancal.geometry.alignment import fit_similarity
-    from humancal.geometry.rotations import rotation_distance_deg
-
-    def radius(cameras):
-        centres = np.stack([c.center_world_m for c in cameras])
-        return float(np.linalg.norm(centres - centres.mean(0), axis=1).mean()) or 1.0
-
-    similarity = fit_similarity(rig_alignment_points(estimated, radius(estimated), with_axes=True),
-                                rig_alignment_points(truth, radius(truth), with_axes=True))
-    aligned = np.stack([similarity.apply_to_camera(c).R_cam_from_world for c in estimated])
-    return rotation_distance_deg(aligned, np.stack([c.R_cam_from_world for c in truth]))
-
-
 def run_scene(index: int, seed: int, views: int | None = None) -> dict:
     """Generate, lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}."""
-    from evaluation.camera_metrics import camera_errors
     from humancal.calibration import (CalibrationError, ExtrinsicsConfig, IntrinsicsConfig, estimate_extrinsics,
                                       estimate_intrinsics)
     from humancal.detections import detections_to_dense
@@ -220,62 +184,8 @@ def run_scene(index: int, seed: int, views: int | None = None) -> dict:
                          traceback=traceback.format_exc(), calibrate_s=time.perf_counter() - clock)
         return {"scene": scene_row, "views": []}
     scene_row["calibrate_s"] = time.perf_counter() - clock
-    diag = result.diagnostics
-    floor_known = diag.floor is not None
-    people = diag.floor.floor_points_m if floor_known else diag.people_world_m
-    errors = camera_errors(result.cameras, list(scene.rig))
-    up_error = float("nan")
-    if floor_known:  # the estimated world's up axis, in the true world, against the true up
-        up_error = float(np.degrees(np.arccos(np.clip((errors["alignment"].R @ [0.0, 0.0, 1.0])[2], -1.0, 1.0))))
-    per_view = diag.per_view
-    failed = _checks(result.cameras, people, floor_known, diag.body_size_ratio, per_view)
-    scene_row.update(
-        outcome="ok", world_frame=diag.world_frame, floor_problem=diag.floor_problem,
-        up_source=diag.floor.up_source if floor_known else "none", up_error_deg=up_error,
-        failed_checks=",".join(failed), poorly_constrained=int((per_view["focal_status"] != "ok").sum()),
-        scale_error_pct=float(100.0 * (1.0 / errors["alignment"].scale - 1.0)), scale_factor=float(diag.scale_factor),
-        body_size_ratio=float(diag.body_size_ratio), mismatched_detections=int(diag.mismatched_detections),
-        regroup=diag.regroup, regroup_detections=list(map(int, diag.regroup_detections)),
-        extrinsics_timings_s=json.dumps({k: round(v, 2) for k, v in diag.timings_s.items()}),
-    )
-    # a view's own failure is judged in a frame its flagged neighbours do not set: the similarity that aligns the
-    # rigs is fitted again on the views the calibration did not flag (poorly_constrained views can drag a small
-    # rig's alignment, and with it every other view's angle, far off)
-    trusted = np.flatnonzero(per_view["focal_status"].to_numpy() == "ok")
-    own = {k: np.asarray(errors[k], float).copy() for k in ("focal_error_pct", "angle_error_deg")}
-    if 2 <= len(trusted) < len(scene.rig):
-        again = camera_errors([result.cameras[v] for v in trusted], [scene.rig[v] for v in trusted])
-        for k in own:
-            own[k][trusted] = again[k]
-    if len(trusted) == 3:
-            own["angle_error_deg"][trusted] = _angles_aligned_with_axes([result.cameras[v] for v in trusted],
-                                                                       [scene.rig[v] for v in trusted])
-    views = []
-    for v, truth in enumerate(scene.rig):
-        bad = (own["focal_error_pct"][v] > SILENT_FOCAL_PCT) or (own["angle_error_deg"][v] > SILENT_ANGLE_DEG)
-        views.append({
-            "scene": index, "view": v, "focal_gt_px": float(truth.K[0, 0]),
-            "k1": float(truth.distortion[0]),
-            "pitch_down_deg": float(np.degrees(np.arcsin(np.clip(-truth.R_cam_from_world[2, 2], -1, 1)))),
-            "focal_error_pct": float(errors["focal_error_pct"][v]),
-            "angle_error_deg": float(errors["angle_error_deg"][v]),
-            "focal_error_trusted_pct": float(own["focal_error_pct"][v]),
-            "angle_error_trusted_deg": float(own["angle_error_deg"][v]),
-            "position_error_mm": float(errors["position_error_mm"][v]),
-            "focal_status": per_view["focal_status"].iloc[v], "bundle_status": per_view["bundle_status"].iloc[v],
-            "focal_source": per_view["focal_source"].iloc[v],
-            "focal_rel_std": float(per_view["focal_rel_std"].iloc[v]),
-            "reprojection_rms_px": float(per_view["reprojection_rms_px"].iloc[v]),
-            "rotation_edges": int(per_view["rotation_edges"].iloc[v]),
-            "agreement": per_view["agreement"].iloc[v], "first_agreement": per_view["first_agreement"].iloc[v],
-            "reregistered": bool(per_view["reregistered"].iloc[v]),
-            "loo_error_sigma": float(per_view["loo_error_sigma"].iloc[v]),
-            "explained_fraction": float(per_view["explained_fraction"].iloc[v]),
-            "far": bool(v >= len(scene.rig) - scene_row["far_views"]),
-            "people_loo_sigma": float(per_view["people_loo_sigma"].iloc[v]),
-            "bundle_groups": int((diag.groups["view"] == v).sum()),
-            "silent_failure": bool(bad and not failed),
-        })
+    fields, views = score_calibration(result, list(scene.rig), index, scene_row["far_views"])
+    scene_row.update(fields)
     return {"scene": scene_row, "views": views}
 
 
@@ -292,14 +202,6 @@ def _run_and_store(job: tuple[int, int, str, int | None]) -> tuple[int, str]:
                    + (f", focal median {np.median([v['focal_error_pct'] for v in result['views']]):.2f} %"
                       if result["views"] else f" ({row.get('message', '')[:120]})")
                    + f" ({row.get('calibrate_s', 0):.1f} s)")
-
-
-def _quantiles(values: pd.Series) -> dict:
-    values = values.dropna()
-    if values.empty:
-        return {"n": 0}
-    return {"n": int(len(values)), "median": float(values.median()), "p90": float(values.quantile(0.9)),
-            "max": float(values.max())}
 
 
 def summarise(scenes: pd.DataFrame, views: pd.DataFrame) -> dict:
@@ -328,23 +230,23 @@ def summarise(scenes: pd.DataFrame, views: pd.DataFrame) -> dict:
         out["views_disagreeing_first"] = int((views["first_agreement"] == "disagrees").sum())
         merged = views.merge(scenes, on="scene", suffixes=("", "_scene"))
         metrics = ("focal_error_pct", "angle_error_deg", "position_error_mm")
-        out["all"] = {m: _quantiles(merged[m]) for m in metrics}
+        out["all"] = {m: quantiles(merged[m]) for m in metrics}
         for factor in ("family", "behaviour", "lifter_seed", "cameras", "portrait", "distortion", "rig", "far"):
-            out[f"by_{factor}"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+            out[f"by_{factor}"] = {str(key): {m: quantiles(group[m]) for m in metrics}
                                    for key, group in merged.groupby(factor)}
         # the acceptance's "people stand or walk" figures per lifter, and what the views left "ok" measure
-        out["by_behaviour_lifter"] = {f"{behaviour} / {seed}": {m: _quantiles(group[m]) for m in metrics}
+        out["by_behaviour_lifter"] = {f"{behaviour} / {seed}": {m: quantiles(group[m]) for m in metrics}
                                       for (behaviour, seed), group in merged.groupby(["behaviour", "lifter_seed"])}
         unflagged = merged[merged["focal_status"] == "ok"]
-        out["by_behaviour_unflagged"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+        out["by_behaviour_unflagged"] = {str(key): {m: quantiles(group[m]) for m in metrics}
                                          for key, group in unflagged.groupby("behaviour")}
         bins = pd.cut(merged["views"], [1, 2, 8, 20, 31], labels=["2", "3-8", "9-20", "21-31"])
-        out["by_views"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+        out["by_views"] = {str(key): {m: quantiles(group[m]) for m in metrics}
                            for key, group in merged.groupby(bins, observed=True)}
         frames = pd.cut(merged["frames"], [0, 50, 120, 300], labels=["20-50", "51-120", "121-300"])
-        out["by_frames"] = {str(key): {m: _quantiles(group[m]) for m in metrics}
+        out["by_frames"] = {str(key): {m: quantiles(group[m]) for m in metrics}
                             for key, group in merged.groupby(frames, observed=True)}
-        out["up_error_deg"] = {str(key): _quantiles(group["up_error_deg"]) for key, group in ok.groupby("behaviour")}
+        out["up_error_deg"] = {str(key): quantiles(group["up_error_deg"]) for key, group in ok.groupby("behaviour")}
         many = ok[ok["views"] >= 21]
         out["calibrate_s"] = {"median": float(ok["calibrate_s"].median()), "max": float(ok["calibrate_s"].max()),
                               "views_21_31_median": float(many["calibrate_s"].median()) if len(many) else None,

@@ -11,6 +11,8 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Literal
 
+from humancal.synthetic.lenses import distorted_radius, fits_monotonic, fold_radius
+
 __all__ = [
     "RigKind",
     "RIG_KINDS",
@@ -24,6 +26,12 @@ __all__ = [
     "FOCAL_LIMITS_PX",
     "IMAGE_SIZE_LIMITS_PX",
     "K1_LIMITS",
+    "K2_LIMITS",
+    "FOCAL_ASPECT_LIMITS",
+    "PRINCIPAL_POINT_FRAC_LIMIT",
+    "FOV_LIMITS_DEG",
+    "TIME_OFFSET_LIMITS_S",
+    "VIEW_FPS_LIMITS",
     "PITCH_LIMITS_DEG",
     "OUT_OF_VIEW_DURATION_S",
 ]
@@ -43,6 +51,19 @@ IMAGE_SIZE_LIMITS_PX = ((480, 480), (1920, 1920))
 """Smallest and largest allowed image (width, height), pixels: each side in [480, 1920], landscape or portrait."""
 K1_LIMITS = (-0.5, 0.5)
 """Allowed radial distortion coefficient k1 (OpenCV model, normalised image coordinates)."""
+K2_LIMITS = (-0.5, 0.5)
+"""Allowed radial distortion coefficient k2 (OpenCV model, normalised image coordinates)."""
+FOCAL_ASPECT_LIMITS = (0.98, 1.02)
+"""Allowed focal aspect ``fy / fx`` (``focal_aspect_range``): non-square pixels or a resampled video, up to 2 %."""
+PRINCIPAL_POINT_FRAC_LIMIT = 0.1
+"""Largest principal point offset per image axis, fraction of the image width or height
+(``principal_point_offset_max_frac``)."""
+FOV_LIMITS_DEG = (30.0, 160.0)
+"""Allowed horizontal field of view through the lens, degrees (``horizontal_fov_range_deg``)."""
+TIME_OFFSET_LIMITS_S = (-2.0, 2.0)
+"""Allowed time offset of a view's frame 0 on the reference clock, seconds (``time_offset_range_s``)."""
+VIEW_FPS_LIMITS = (1.0, 1000.0)
+"""Allowed per-view frame rates, frames per second (``view_fps_choices``)."""
 PITCH_LIMITS_DEG = (0.0, 75.0)
 """Allowed angle of a camera's optical axis below the horizon, degrees (``camera_pitch_range_deg``)."""
 OUT_OF_VIEW_DURATION_S = (1.0, 4.0)
@@ -236,6 +257,28 @@ class SceneConfig:
         principal_point_offset_px: each camera's principal point is moved this far from the image centre, pixels,
             in a direction drawn per camera (real rigs: Human3.6M 12-20 px, Shelf 13-52 px). In [0, 200]; 0, the
             default, keeps it at the centre, where the calibration assumes it.
+        distortion_k2_range: (min, max) radial distortion k2 of the lenses, within [-0.5, 0.5]; each camera draws its
+            k2 uniformly after its k1 (an action camera: k1 about -0.3 with k2 about 0.1). (0, 0), the default, gives
+            k1-only lenses. Other than (0, 0), the lens must stay one-to-one over the whole image: the lens of the
+            smallest k1 and k2 (the first to fold) must reach beyond the image corner at the shortest focal (or
+            widest field of view).
+        focal_aspect_range: (min, max) focal aspect ``fy / fx`` within [0.98, 1.02]; each camera draws one (fx from
+            ``focal_range_px``, fy = aspect * fx). (1, 1), the default, gives square pixels.
+        principal_point_offset_max_frac: each camera's principal point is moved by ``(u_x width, u_y height)`` with
+            ``u_x``, ``u_y`` drawn uniformly in [-max, max] (a phone's or action camera's sensor crop: up to 5 % of the
+            image off centre). In [0, 0.1]; 0, the default, draws nothing. Not together with
+            ``principal_point_offset_px``.
+        horizontal_fov_range_deg: None (default: each camera draws its focal length from ``focal_range_px``), or
+            (min, max) horizontal field of view through the lens, degrees, within [30, 160]: each camera draws one and
+            its focal length follows from it and its lens (``fx = (width / 2) / r_d(tan(fov / 2))`` with ``r_d`` the
+            lens's radial model), so a wide barrel lens gets the field of view it is sold with. Not for ``"h36m"``.
+        time_offset_range_s: (min, max) time offset of each view except view 0, seconds, within [-2, 2]: view ``v``'s
+            frame ``n`` is taken at reference time ``n / fps_v + offset_v`` (``offset_v``: the reference time of its
+            frame 0; view 0 is the reference clock, offset 0). (0, 0), the default, keeps every view synchronised.
+        view_fps_choices: None (default: every view films at ``fps``) or the frame rates, frames per second, each view
+            draws one from uniformly (e.g. (25, 30, 50, 60)); 1 to 8 values in [1, 1000]. The ground truth stays on the
+            reference clock (``fps``, frame 0 at t = 0); each view's detections carry its own frame numbers
+            (``docs/synthetic.md``, "Unsynchronised videos").
     """
 
     num_people: int = 4
@@ -261,6 +304,12 @@ class SceneConfig:
     dome_elevation_range_deg: tuple[float, float] = (-5.0, 55.0)
     far_views: int = 0
     far_distance_factor: tuple[float, float] = (2.0, 4.0)
+    distortion_k2_range: tuple[float, float] = (0.0, 0.0)
+    focal_aspect_range: tuple[float, float] = (1.0, 1.0)
+    principal_point_offset_max_frac: float = 0.0
+    horizontal_fov_range_deg: tuple[float, float] | None = None
+    time_offset_range_s: tuple[float, float] = (0.0, 0.0)
+    view_fps_choices: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         owner = "SceneConfig"
@@ -322,7 +371,36 @@ class SceneConfig:
         pitch = self.camera_pitch_range_deg
         if pitch is not None:
             pitch = _check_interval(owner, "camera_pitch_range_deg", pitch, *PITCH_LIMITS_DEG)
+        k2 = _check_interval(owner, "distortion_k2_range", self.distortion_k2_range, *K2_LIMITS)
+        aspect = _check_interval(owner, "focal_aspect_range", self.focal_aspect_range, *FOCAL_ASPECT_LIMITS)
+        _check_range(owner, "principal_point_offset_max_frac", self.principal_point_offset_max_frac, 0.0,
+                     PRINCIPAL_POINT_FRAC_LIMIT)
+        if self.principal_point_offset_max_frac and self.principal_point_offset_px:
+            raise ValueError("SceneConfig.principal_point_offset_max_frac and principal_point_offset_px are both set; "
+                             "allowed: one of them (the other 0)")
+        fov = self.horizontal_fov_range_deg
+        if fov is not None:
+            fov = _check_interval(owner, "horizontal_fov_range_deg", fov, *FOV_LIMITS_DEG)
+            if self.rig == "h36m":
+                raise ValueError("SceneConfig.horizontal_fov_range_deg must be None for rig 'h36m' (its focal lengths "
+                                 "are measured ones)")
+        _check_lens(k1, k2, aspect, focal, fov, (int(size[0]), int(size[1])))
+        offsets = _check_interval(owner, "time_offset_range_s", self.time_offset_range_s, *TIME_OFFSET_LIMITS_S)
+        choices = self.view_fps_choices
+        if choices is not None:
+            if not (isinstance(choices, (tuple, list)) and 1 <= len(choices) <= 8):
+                raise ValueError(f"SceneConfig.view_fps_choices={choices!r} must be None or 1 to 8 frame rates in "
+                                 f"[{VIEW_FPS_LIMITS[0]}, {VIEW_FPS_LIMITS[1]}]")
+            for value in choices:
+                _check_range(owner, "view_fps_choices", value, *VIEW_FPS_LIMITS)
+            choices = tuple(float(v) for v in choices)
         # Normalise containers to tuples of floats/ints so that equal configs compare and hash equal.
+        object.__setattr__(self, "distortion_k2_range", k2)
+        object.__setattr__(self, "focal_aspect_range", aspect)
+        object.__setattr__(self, "principal_point_offset_max_frac", float(self.principal_point_offset_max_frac))
+        object.__setattr__(self, "horizontal_fov_range_deg", fov)
+        object.__setattr__(self, "time_offset_range_s", offsets)
+        object.__setattr__(self, "view_fps_choices", choices)
         object.__setattr__(self, "focal_range_px", focal)
         object.__setattr__(self, "image_size_px", (int(size[0]), int(size[1])))
         object.__setattr__(self, "area_size_m", (float(area[0]), float(area[1])))
@@ -340,6 +418,11 @@ class SceneConfig:
         """Length of the scene, seconds."""
         return self.num_frames / self.fps
 
+    @property
+    def unsynced(self) -> bool:
+        """Whether the views film on their own clocks (time offsets or per-view frame rates asked for)."""
+        return self.time_offset_range_s != (0.0, 0.0) or self.view_fps_choices is not None
+
     def replace(self, **changes: object) -> SceneConfig:
         """A copy with some fields changed (validated again).
 
@@ -351,3 +434,31 @@ class SceneConfig:
         if unknown:
             raise ValueError(f"SceneConfig has no field(s) {unknown}; fields are {sorted(known)}")
         return replace(self, **changes)
+
+
+def _check_lens(k1: tuple[float, float], k2: tuple[float, float], aspect: tuple[float, float],
+                focal_px: tuple[float, float], fov_deg: tuple[float, float] | None, size: tuple[int, int]) -> None:
+    """With a k2 or a field of view asked for, the lens of the smallest coefficients (the first to fold: the model's
+    slope grows with every coefficient) must be one-to-one over the whole image at the shortest focal or the widest
+    field of view; a field of view must lie inside the fold of that lens."""
+    if k2 == (0.0, 0.0) and fov_deg is None:
+        return  # k1-only lenses keep their old rule: joints beyond a fold inside the image are not seen
+    width, height = size
+    corner_over_half_width = math.hypot(1.0, height / (width * aspect[0]))
+    if fov_deg is None:
+        half_width = width / (2.0 * focal_px[0])
+    else:
+        half_fov_tan = math.tan(math.radians(fov_deg[1]) / 2.0)
+        fold = fold_radius(k1[0], k2[0])
+        if half_fov_tan >= fold:
+            raise ValueError(
+                f"SceneConfig.horizontal_fov_range_deg={fov_deg!r} is out of range for the lens k1={k1[0]}, k2={k2[0]}: "
+                f"it folds at {math.degrees(2.0 * math.atan(fold)):.1f} degrees; allowed: a widest field of view "
+                "below that, or larger k1 / k2")
+        half_width = float(distorted_radius(half_fov_tan, k1[0], k2[0]))
+    corner = half_width * corner_over_half_width
+    if not fits_monotonic(k1[0], k2[0], corner):
+        raise ValueError(
+            f"SceneConfig.distortion_k2_range={k2!r} with distortion_k1_range={k1!r} folds inside the image (lens k1="
+            f"{k1[0]}, k2={k2[0]} at the image corner, normalised radius {corner:.2f}); allowed: a lens one-to-one over "
+            "the image (larger k1 / k2, a longer focal or a narrower field of view)")

@@ -18,6 +18,8 @@ Then false positives are added per view and frame (Poisson): a real pose from el
 placed at a random image position and depth (a reflection, a poster, a passer-by), whole or only one body
 part. Every random number comes from the one generator passed in, in a fixed order. A person out of the
 capture (``hidden``: the scene's ``out_of_view_spells``) is in no image: nobody detects or is occluded by them.
+Views on their own clocks (unsynchronised videos) go through :func:`simulate_view_detections`: each view with the
+people's keypoints at its own frames' times, numbered by its own frames.
 """
 
 from __future__ import annotations
@@ -29,9 +31,11 @@ import numpy as np
 from humancal.camera import Camera, project_points
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX, NUM_JOINTS, joint_indices
 from humancal.synthetic.config import DetectorNoise
+from humancal.synthetic.lenses import fold_radius
 from humancal.synthetic.occlusion import occlusion_degree
 
-__all__ = ["DetectorNoise", "DetectorOutput", "JOINT_NOISE_WEIGHTS", "draw_keypoint_bias", "simulate_detections"]
+__all__ = ["DetectorNoise", "DetectorOutput", "JOINT_NOISE_WEIGHTS", "draw_keypoint_bias", "simulate_detections",
+           "simulate_view_detections"]
 
 _COCO_SIGMAS = np.array(
     [0.026, 0.025, 0.025, 0.035, 0.035, 0.079, 0.079, 0.072, 0.072, 0.062, 0.062]
@@ -108,17 +112,10 @@ def draw_keypoint_bias(std_m: float, rng: np.random.Generator) -> np.ndarray:
 
 
 def _fold_radius(distortion: np.ndarray) -> float:
-    """Undistorted radius (normalised image coordinates) where the radial lens model stops growing: the
-    first zero of ``d/dr [r (1 + k1 r^2 + k2 r^4 + k3 r^6)]``, inf for an ideal pinhole or a lens that never
-    folds within the range that matters (r <= 4, about 76 degrees off axis)."""
+    """Undistorted radius (normalised image coordinates) where the camera's radial lens model stops growing
+    (:func:`humancal.synthetic.lenses.fold_radius` of its k1, k2, k3), inf for an ideal pinhole."""
     k1, k2, _, _, k3 = np.asarray(distortion, dtype=np.float64)
-    if k1 == 0.0 and k2 == 0.0 and k3 == 0.0:
-        return float("inf")
-    r = np.linspace(0.0, 4.0, 4001)
-    r2 = r * r
-    slope = 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + r2 * 7.0 * k3))
-    folds = np.nonzero(slope <= 0.0)[0]
-    return float(r[folds[0]]) if len(folds) else float("inf")
+    return fold_radius(k1, k2, k3)
 
 
 def _within_lens(camera: Camera, points_world_m: np.ndarray) -> np.ndarray:
@@ -372,7 +369,73 @@ def simulate_detections(
         out["view"] = np.full(len(out["frame"]), v)
         per_view.append(out)
     fp = _false_positives(keypoints, height, cameras, noise, rng)
-    parts = per_view + [fp]
+    return _assemble(per_view, [fp])
+
+
+def simulate_view_detections(
+    view_keypoints_world_m: list[np.ndarray],
+    view_frames: list[np.ndarray],
+    height_m: np.ndarray,
+    cameras: list[Camera],
+    noise: DetectorNoise,
+    rng: np.random.Generator,
+    view_hidden: list[np.ndarray | None] | None = None,
+) -> DetectorOutput:
+    """Run the simulated detector over views that film on their own clocks (unsynchronised videos): each view sees
+    the people at its own frames' times, numbered by its own frame numbers.
+
+    Per view, the real people's detections and then the view's false positives (whose poses are drawn from the
+    view's own frames); the random draws differ from :func:`simulate_detections` (a synchronised scene keeps that).
+
+    Args:
+        view_keypoints_world_m: per view, (P, N_v, 23, 3) keypoints at the view's frame times, world metres.
+        view_frames: per view, (N_v,) the view's own frame numbers of those frames (ascending, >= 0).
+        height_m: (P,) standing heights, metres.
+        cameras: the V cameras.
+        noise: the detector model.
+        rng: source of randomness.
+        view_hidden: optional per view (P, N_v) bool (or None), True where a person is out of every view.
+
+    Returns:
+        The :class:`DetectorOutput` with ``frame`` the view's own frame numbers; its per-view arrays
+        (``in_image`` ...) span frames ``0..max_v(last frame)`` of every view's own numbering, False (``scale_px``:
+        NaN) at frames a view does not film.
+
+    Raises:
+        ValueError: inconsistent numbers of views, frames or people.
+    """
+    height = np.asarray(height_m, dtype=np.float64)
+    if not (len(view_keypoints_world_m) == len(view_frames) == len(cameras)):
+        raise ValueError(f"view_keypoints_world_m, view_frames and cameras must have one entry per view, got "
+                         f"{len(view_keypoints_world_m)}, {len(view_frames)}, {len(cameras)}")
+    hidden = view_hidden if view_hidden is not None else [None] * len(cameras)
+    num_frames = max(int(np.max(f)) + 1 if len(f) else 0 for f in view_frames)
+    per_view, false_positives = [], []
+    for v, camera in enumerate(cameras):
+        keypoints = np.asarray(view_keypoints_world_m[v], dtype=np.float64)
+        frames = np.asarray(view_frames[v], dtype=np.int64)
+        if keypoints.ndim != 4 or keypoints.shape[1:] != (len(frames), NUM_JOINTS, 3) or len(keypoints) != len(height):
+            raise ValueError(f"view {v}: keypoints must be (P, N_v, {NUM_JOINTS}, 3) with P = {len(height)} and "
+                             f"N_v = {len(frames)} frames, got {keypoints.shape}")
+        out = _view_detections(keypoints, height, camera, noise, rng, hidden[v])
+        out["frame"] = frames[out["frame"]]
+        out["view"] = np.full(len(out["frame"]), v)
+        for key, fill in (("in_image", False), ("occlusion", 0.0), ("scale_px", np.nan), ("eligible", False),
+                          ("detected", False)):
+            padded = np.full(out[key].shape[:1] + (num_frames,) + out[key].shape[2:], fill, dtype=out[key].dtype)
+            padded[:, frames] = out[key]
+            out[key] = padded
+        per_view.append(out)
+        fp = _false_positives(keypoints, height, [camera], noise, rng)
+        fp["frame"], fp["view"] = frames[fp["frame"]], np.full(len(fp["frame"]), v)
+        false_positives.append(fp)
+    return _assemble(per_view, false_positives)
+
+
+def _assemble(per_view: list[dict[str, np.ndarray]], false_positives: list[dict[str, np.ndarray]]) -> DetectorOutput:
+    """One :class:`DetectorOutput` from the views' detections and the false positives, ordered by frame, then view,
+    then person (false positives last within a frame and view)."""
+    parts = per_view + false_positives
     frame = np.concatenate([p["frame"] for p in parts])
     view = np.concatenate([p["view"] for p in parts])
     person = np.concatenate([p["person_id"] for p in parts])

@@ -22,6 +22,20 @@ PRESETS: MappingProxyType[str, SceneConfig] = MappingProxyType(
         ),
         # Small and fast, for tests.
         "tiny": SceneConfig(num_people=2, num_views=3, num_frames=20, rig="ring", seed=0),
+        # Consumer rigs (docs/synthetic.md, "Consumer rigs"). Phones: portrait videos started by hand (time offsets up
+        # to 2 s, 30 or 60 fps), mild lenses (|k1| <= 0.1), principal points up to 5 % off centre, fx != fy (2 %).
+        "phone": SceneConfig(
+            num_people=3, num_views=5, num_frames=60, rig="ring", seed=6, image_size_px=(1080, 1920),
+            focal_range_px=(1350.0, 1650.0), area_size_m=(4.0, 3.5), camera_height_range_m=(1.0, 1.8),
+            distortion_k1_range=(-0.1, 0.1), principal_point_offset_max_frac=0.05, focal_aspect_range=(0.98, 1.02),
+            time_offset_range_s=(-2.0, 2.0), view_fps_choices=(30.0, 60.0),
+        ),
+        # Action cameras: strong barrel lenses (k1 -0.3 +- 0.05, k2 0.1 +- 0.03), 100-120 degrees across the image.
+        "action_cam": SceneConfig(
+            num_people=3, num_views=4, num_frames=60, rig="ring", seed=7, distortion_k1_range=(-0.35, -0.25),
+            distortion_k2_range=(0.07, 0.13), horizontal_fov_range_deg=(100.0, 120.0), camera_height_range_m=(1.5, 3.0),
+            area_fill=1.0,
+        ),
         # The same as tiny with a perfect detector (exact projections, nothing missed).
         "tiny_clean": SceneConfig(
             num_people=2, num_views=3, num_frames=20, rig="ring", seed=0, noise=DetectorNoise.none()

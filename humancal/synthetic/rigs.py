@@ -1,11 +1,12 @@
 """Static camera rigs around the capture area: random rings and arcs, and the Human3.6M cameras.
 
-Every camera has square pixels and the principal point at the image centre (unless
-``principal_point_offset_px`` moves it), is placed so that the capture
-area fills about ``area_fill`` of its horizontal field of view (or, with ``camera_pitch_range_deg``, of the
+Every camera has square pixels (unless ``focal_aspect_range`` draws fy / fx) and the principal point at the image
+centre (unless ``principal_point_offset_px`` or ``principal_point_offset_max_frac`` moves it), is placed so that the
+capture area fills about ``area_fill`` of its horizontal field of view (or, with ``camera_pitch_range_deg``, of the
 image extent that binds at the drawn tilt), and is aimed at a point near the area centre at mid-body height
-with a little random error in aim and roll. Lenses are ideal pinholes unless ``distortion_k1_range`` asks for
-radial distortion; the placement then makes sure the area fits the distorted image too.
+with a little random error in aim and roll. Lenses are ideal pinholes unless ``distortion_k1_range`` /
+``distortion_k2_range`` ask for radial distortion (:mod:`humancal.synthetic.lenses`); the placement then makes sure
+the area fits the distorted image too.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 from humancal.camera import Camera
 from humancal.settings import dataset_dir
 from humancal.synthetic.config import SceneConfig
+from humancal.synthetic.lenses import LensDraws, distorted_radius, draw_lenses, fold_radius, undistorted_radius
 
 __all__ = [
     "look_at",
@@ -80,37 +82,15 @@ def intrinsics(focal_px: float, width_px: int, height_px: int) -> np.ndarray:
     return np.array([[focal_px, 0.0, width_px / 2.0], [0.0, focal_px, height_px / 2.0], [0.0, 0.0, 1.0]])
 
 
-def monotonic_radius(k1: float) -> float:
+def monotonic_radius(k1: float, k2: float = 0.0) -> float:
     """Largest undistorted radius (normalised image coordinates) up to which the radial model
-    ``r_d = r (1 + k1 r^2)`` grows with ``r``: ``1 / sqrt(-3 k1)`` for barrel distortion (k1 < 0), else inf.
+    ``r_d = r (1 + k1 r^2 + k2 r^4)`` grows with ``r`` (:func:`humancal.synthetic.lenses.fold_radius`):
+    ``1 / sqrt(-3 k1)`` for a k1-only barrel lens, inf for a lens that never folds.
 
     Beyond it a barrel lens model folds points from outside the field of view back into the image, so the
     detector treats such points as unseen.
     """
-    return float(1.0 / np.sqrt(-3.0 * k1)) if k1 < 0.0 else float("inf")
-
-
-def undistorted_radius(distorted_radius: np.ndarray, k1: np.ndarray) -> np.ndarray:
-    """Undistorted radius whose image under ``r_d = r (1 + k1 r^2)`` is ``distorted_radius`` (normalised
-    image coordinates), capped at :func:`monotonic_radius` where the distorted radius is out of reach.
-
-    Args:
-        distorted_radius: (N,) radii in the image plane, normalised (pixels / focal).
-        k1: (N,) radial coefficients.
-
-    Returns:
-        (N,) undistorted radii (the same where k1 = 0).
-    """
-    r_d = np.asarray(distorted_radius, dtype=np.float64)
-    k = np.broadcast_to(np.asarray(k1, dtype=np.float64), r_d.shape)
-    r_max = np.array([monotonic_radius(v) for v in k.reshape(-1)]).reshape(k.shape)
-    low, high = np.zeros_like(r_d), np.minimum(r_max, r_d * 2.0 + 1.0)
-    # Bisection on the monotonic branch: r (1 + k1 r^2) grows from 0 on [0, r_max].
-    for _ in range(60):
-        mid = 0.5 * (low + high)
-        below = mid * (1.0 + k * mid * mid) < r_d
-        low, high = np.where(below, mid, low), np.where(below, high, mid)
-    return np.where(k == 0.0, r_d, 0.5 * (low + high))
+    return fold_radius(k1, k2)
 
 
 def _fit_distance_m(
@@ -156,9 +136,11 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     ``camera_pitch_range_deg`` set, each camera draws its tilt below the horizon instead of its height and
     stands on that line of sight through the aim point, at the distance where the box of the area (plus a
     body radius, floor to 2 m) spans ``area_fill`` of the binding image half-extent; its height follows.
-    With ``distortion_k1_range`` other than (0, 0), each camera finally draws its k1; a pincushion lens
-    (k1 > 0) narrows the fields of view above to what its images show, a barrel lens leaves the placement of
-    a pinhole (it only pulls the image points inwards) unless its model folds back inside the image.
+    Each camera finally draws its lens (:func:`humancal.synthetic.lenses.draw_lenses`: k1, k2 and fy / fx, each only
+    when its range asks for it); with ``horizontal_fov_range_deg`` the first draw is the field of view and the focal
+    length follows from it through the lens. A pincushion lens (r_d > r) narrows the fields of view above to what its
+    images show, a barrel lens leaves the placement of a pinhole (it only pulls the image points inwards) unless its
+    model folds back inside the image.
 
     Args:
         config: the scene config (``rig`` must be ``"ring"`` or ``"arc"``).
@@ -179,7 +161,7 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     else:
         raise ValueError(f"ring_rig: config.rig={config.rig!r} is not 'ring' or 'arc'")
     azimuth = azimuth + rng.uniform(-0.25, 0.25, num) * spacing
-    focal = rng.uniform(*config.focal_range_px, num)
+    focal = _draw_focal_or_fov(config, rng, num)
     tilted = config.camera_pitch_range_deg is not None
     if tilted:
         pitch = np.radians(rng.uniform(*config.camera_pitch_range_deg, num))
@@ -189,18 +171,15 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     for _ in range(num):
         targets.append(np.array([*rng.normal(0.0, _AIM_JITTER_M, 2), _AIM_HEIGHT_M + rng.normal(0.0, 0.1)]))
         rolls.append(float(rng.normal(0.0, _ROLL_JITTER_DEG)))
-    distorted = config.distortion_k1_range != (0.0, 0.0)
-    k1 = rng.uniform(*config.distortion_k1_range, num) if distorted else np.zeros(num)
+    lenses = draw_lenses(config.distortion_k1_range, config.distortion_k2_range, config.focal_aspect_range, num, rng)
+    focal = _focal_from_fov(config, focal, lenses)
+    distorted = lenses.distorted
     # Normalised half-width and half-height of the (undistorted) view that the image shows. A pincushion lens
     # (k1 > 0) pushes points outwards: it shows less, and the cameras step back. A barrel lens (k1 < 0) shows
     # more, but pulls the points inwards unevenly (more along the diagonal than the narrow side); the cameras
     # stand where a pinhole would, so the area fits either way, unless the lens model folds back on itself
     # inside the image (strong k1, wide lens): then only the view inside the fold radius counts.
-    half_w = width / (2.0 * focal)
-    half_h = height / (2.0 * focal)
-    if distorted:
-        half_w = np.minimum(undistorted_radius(half_w, k1), half_w)
-        half_h = np.minimum(undistorted_radius(half_h, k1), half_h)
+    half_w, half_h = _half_extent(config, focal, lenses)
     cameras = []
     if tilted:
         nominal_aim = np.array([0.0, 0.0, _AIM_HEIGHT_M])
@@ -209,14 +188,14 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
             direction = np.array([np.cos(azimuth[v]) * np.cos(pitch[v]), np.sin(azimuth[v]) * np.cos(pitch[v]),
                                   np.sin(pitch[v])])
             center = targets[v] + distance * direction
-            cameras.append(_camera(focal[v], k1[v], center, targets[v], rolls[v], width, height))
+            cameras.append(_camera(focal[v], lenses, v, center, targets[v], rolls[v], width, height))
         return cameras
     radius = 0.5 * float(np.hypot(*config.area_size_m)) + _BODY_RADIUS_M
     half_fov = np.arctan(half_w) if distorted else np.arctan(width / (2.0 * focal))
     distance = radius / np.sin(config.area_fill * half_fov)
     for v in range(num):
         center = np.array([distance[v] * np.cos(azimuth[v]), distance[v] * np.sin(azimuth[v]), cam_height[v]])
-        cameras.append(_camera(focal[v], k1[v], center, targets[v], rolls[v], width, height))
+        cameras.append(_camera(focal[v], lenses, v, center, targets[v], rolls[v], width, height))
     return cameras
 
 
@@ -235,13 +214,10 @@ def dome_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     spacing = 2 * np.pi / num
     azimuth = rng.uniform(0, 2 * np.pi) + spacing * (np.arange(num) + rng.uniform(-0.25, 0.25, num))
     elevation = np.radians(rng.uniform(*config.dome_elevation_range_deg, num))
-    focal = rng.uniform(*config.focal_range_px, num)
-    distorted = config.distortion_k1_range != (0.0, 0.0)
-    k1 = rng.uniform(*config.distortion_k1_range, num) if distorted else np.zeros(num)
-    half_w, half_h = width / (2.0 * focal), height / (2.0 * focal)
-    if distorted:
-        half_w = np.minimum(undistorted_radius(half_w, k1), half_w)
-        half_h = np.minimum(undistorted_radius(half_h, k1), half_h)
+    focal = _draw_focal_or_fov(config, rng, num)
+    lenses = draw_lenses(config.distortion_k1_range, config.distortion_k2_range, config.focal_aspect_range, num, rng)
+    focal = _focal_from_fov(config, focal, lenses)
+    half_w, half_h = _half_extent(config, focal, lenses)
     cameras = []
     for v in range(num):
         target = np.array([*rng.normal(0.0, _AIM_JITTER_M, 2), _AIM_HEIGHT_M + rng.normal(0.0, 0.1)])
@@ -252,7 +228,7 @@ def dome_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
             distance = _fit_distance_m(config, float(elevation[v]), (half_w[v], half_h[v]), target)
         direction = np.array([np.cos(azimuth[v]) * np.cos(elevation[v]), np.sin(azimuth[v]) * np.cos(elevation[v]),
                               np.sin(elevation[v])])
-        cameras.append(_camera(focal[v], k1[v], target + distance * direction, target, roll, width, height))
+        cameras.append(_camera(focal[v], lenses, v, target + distance * direction, target, roll, width, height))
     return cameras
 
 
@@ -278,15 +254,55 @@ def _far_cameras(cameras: list[Camera], config: SceneConfig, rng: np.random.Gene
     return moved
 
 
-def _camera(
-    focal_px: float, k1: float, center: np.ndarray, target: np.ndarray, roll_deg: float, width: int, height: int
-) -> Camera:
+def _draw_focal_or_fov(config: SceneConfig, rng: np.random.Generator, num: int) -> np.ndarray:
+    """(V,) drawn focal lengths, pixels, or, with ``horizontal_fov_range_deg``, drawn horizontal fields of view,
+    degrees (turned into focal lengths by :func:`_focal_from_fov` once the lenses are drawn); one draw either way."""
+    drawn_range = config.horizontal_fov_range_deg or config.focal_range_px
+    return rng.uniform(*drawn_range, num)
+
+
+def _focal_from_fov(config: SceneConfig, drawn: np.ndarray, lenses: LensDraws) -> np.ndarray:
+    """(V,) focal lengths fx, pixels: ``drawn`` itself, or the focal at which each drawn horizontal field of view
+    (degrees) reaches the image's left and right edges through the camera's lens."""
+    if config.horizontal_fov_range_deg is None:
+        return drawn
+    half_width = distorted_radius(np.tan(np.radians(drawn) / 2.0), lenses.k1, lenses.k2)
+    return config.image_size_px[0] / (2.0 * half_width)
+
+
+def _half_extent(config: SceneConfig, focal_px: np.ndarray, lenses: LensDraws) -> tuple[np.ndarray, np.ndarray]:
+    """(V,) undistorted normalised half-width and half-height of the view each camera's image shows along its axes.
+
+    Through a lens, the image's edges lie at the undistorted radii of the distorted ones. A pincushion lens shows
+    less than a pinhole of its focal; a barrel lens shows more, but pulls the points inwards unevenly (more along the
+    diagonal than along the axes), so by default the cameras keep the pinhole's extent (the area fits either way).
+    With ``horizontal_fov_range_deg`` the field of view through the lens is what was asked for, and the placement
+    uses it.
+    """
+    width, height = config.image_size_px
+    half_w, half_h = width / (2.0 * focal_px), height / (2.0 * (focal_px * lenses.aspect))
+    if not lenses.distorted:
+        return half_w, half_h
+    through_w = undistorted_radius(half_w, lenses.k1, lenses.k2)
+    through_h = undistorted_radius(half_h, lenses.k1, lenses.k2)
+    if config.horizontal_fov_range_deg is not None:
+        return through_w, through_h
+    return np.minimum(through_w, half_w), np.minimum(through_h, half_h)
+
+
+def _with_lens(K: np.ndarray, lenses: LensDraws, v: int) -> tuple[np.ndarray, ...]:
+    """Camera ``v``'s ``K`` with fy = aspect * fx (unchanged for square pixels), and its (5,) distortion."""
+    K = K.copy()
+    K[1, 1] = K[0, 0] * lenses.aspect[v]
+    return K, lenses.distortion(v)
+
+
+def _camera(focal_px: float, lenses: LensDraws, v: int, center: np.ndarray, target: np.ndarray, roll_deg: float,
+            width: int, height: int) -> Camera:
     R = look_at(center, target, roll_deg=roll_deg)
-    camera = Camera.from_center(intrinsics(focal_px, width, height), R, center, width, height)
-    if k1 == 0.0:
-        return camera
-    return Camera(camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m, width, height,
-                  np.array([k1, 0.0, 0.0, 0.0, 0.0]))
+    K, distortion = _with_lens(intrinsics(focal_px, width, height), lenses, v)
+    camera = Camera.from_center(K, R, center, width, height)
+    return Camera(camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m, width, height, distortion)
 
 
 def load_h36m_cameras(path: Path, subject: str) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
@@ -378,14 +394,18 @@ def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
         cameras = dome_rig(config, rng)
     elif config.rig == "h36m":
         cameras = h36m_rig(config)
-        if config.distortion_k1_range != (0.0, 0.0):
-            k1 = rng.uniform(*config.distortion_k1_range, len(cameras))
-            cameras = [Camera(c.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px,
-                              np.array([k, 0.0, 0.0, 0.0, 0.0])) for c, k in zip(cameras, k1)]
+        lenses = draw_lenses(config.distortion_k1_range, config.distortion_k2_range, config.focal_aspect_range,
+                             len(cameras), rng)
+        with_lenses = []
+        for v, c in enumerate(cameras):
+            K, distortion = _with_lens(c.K, lenses, v)
+            with_lenses.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, distortion))
+        cameras = with_lenses
     else:
         raise ValueError(f"SceneConfig.rig={config.rig!r} is unknown; allowed: 'ring', 'arc', 'dome', 'h36m'")
     cameras = _far_cameras(cameras, config, rng)
-    return _offset_principal_points(cameras, config.principal_point_offset_px, rng)
+    cameras = _offset_principal_points(cameras, config.principal_point_offset_px, rng)
+    return _shift_principal_points(cameras, config.principal_point_offset_max_frac, rng)
 
 
 def _offset_principal_points(cameras: list[Camera], offset_px: float, rng: np.random.Generator) -> list[Camera]:
@@ -398,5 +418,19 @@ def _offset_principal_points(cameras: list[Camera], offset_px: float, rng: np.ra
     for c, a in zip(cameras, angle):
         K = c.K.copy()
         K[:2, 2] += offset_px * np.array([np.cos(a), np.sin(a)])
+        moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
+    return moved
+
+
+def _shift_principal_points(cameras: list[Camera], max_frac: float, rng: np.random.Generator) -> list[Camera]:
+    """The cameras with their principal points moved by ``(u_x width, u_y height)``, ``u`` uniform in
+    ``[-max_frac, max_frac]`` per axis and camera (no draw when 0: the scenes without it keep their random stream)."""
+    if max_frac == 0.0:
+        return cameras
+    fraction = rng.uniform(-max_frac, max_frac, (len(cameras), 2))
+    moved = []
+    for c, u in zip(cameras, fraction):
+        K = c.K.copy()
+        K[:2, 2] += u * np.array([c.width_px, c.height_px])
         moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
     return moved

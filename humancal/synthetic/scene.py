@@ -1,8 +1,13 @@
 """Generate a whole synthetic scene: people, motions, cameras and detections, as canonical tables.
 
 Randomness: one ``numpy.random.Generator`` seeded with ``config.seed`` spawns one independent child stream
-per stage (people, motions, cameras, detector, detection ids), so the same config gives the same scene bit
-for bit, and changing e.g. only the noise model leaves people, motions and cameras unchanged.
+per stage (people, motions, cameras, detector, detection ids, out-of-view spells, keypoint bias, view clocks), so the
+same config gives the same scene bit for bit, and changing e.g. only the noise model leaves people, motions and
+cameras unchanged.
+
+Unsynchronised videos (``time_offset_range_s``, ``view_fps_choices``; :mod:`humancal.synthetic.clocks`): the motion
+is generated on the reference clock long enough to cover every view's frames, each view sees the people's keypoints
+linearly interpolated at its own frames' times, and its detections carry its own frame numbers.
 """
 
 from __future__ import annotations
@@ -19,9 +24,10 @@ import torch
 from humancal.body import PHENOTYPE_NAMES, BodyModel
 from humancal.camera import Camera, cameras_to_table
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
+from humancal.synthetic.clocks import ViewClocks, draw_clocks, hidden_at, keypoints_at, synced_clocks
 from humancal.synthetic.config import OUT_OF_VIEW_DURATION_S, SceneConfig
 from humancal.synthetic.motions import Motions, generate_motions
-from humancal.synthetic.noise import DetectorOutput, draw_keypoint_bias, simulate_detections
+from humancal.synthetic.noise import DetectorOutput, draw_keypoint_bias, simulate_detections, simulate_view_detections
 from humancal.synthetic.people import People, sample_people
 from humancal.synthetic.rigs import make_rig
 from humancal.tables import validate_table
@@ -44,10 +50,12 @@ class SyntheticScene:
 
     Attributes:
         detections: canonical ``detections``: one row per reported joint; ``det_id`` is a random
-            permutation within each (frame, view), so its order says nothing about identity.
+            permutation within each (frame, view), so its order says nothing about identity. ``frame`` is each view's
+            own frame number (the reference frame itself unless the views are unsynchronised: ``clocks``).
         cameras: canonical ``cameras`` of the rig.
         poses3d: canonical ``poses3d``: ground-truth 23 keypoints of every person and frame (valid = True).
-        associations: canonical ``associations``: the true person of every detection, -1 for false positives.
+        associations: canonical ``associations``: the true person of every detection, -1 for false positives
+            (keyed like ``detections``: each view's own frame numbers).
         people: canonical ``people``: phenotypes and height of every person.
         motions: canonical ``motions``: per person and frame, ``bone_rotmats_local`` (B x 3 x 3 flattened
             row-major, bones in ``BodyModel.posed_bones`` order), ``root_translation_m``, ``phenotypes``,
@@ -71,6 +79,10 @@ class SyntheticScene:
         det_id: (N,) the det_id of each detection of ``detector``.
         keypoint_bias_m: (23, 3) the detector's keypoint offsets in their bones, metres
             (``DetectorNoise.keypoint_bias_m``; zeros without a bias).
+        clocks: the views' clocks (:class:`~humancal.synthetic.clocks.ViewClocks`): per view its frame rate
+            ``clocks.fps`` (V,), frames per second, its time offset ``clocks.time_offset_s`` (V,), seconds (the
+            reference time of its frame 0; view 0: 0) and the frames it films; ``view_clocks`` is the same as a table.
+            A synchronised scene: every view at ``config.fps``, offsets 0, frames ``0..F-1``.
     """
 
     config: SceneConfig
@@ -92,6 +104,14 @@ class SyntheticScene:
     detector: DetectorOutput
     det_id: np.ndarray
     keypoint_bias_m: np.ndarray
+    clocks: ViewClocks
+
+    @property
+    def view_clocks(self) -> pd.DataFrame:
+        """The true clock of every view, one row per view: ``sequence, view, fps, time_offset_s,
+        time_offset_frames`` (offset in the view's own frames), ``first_frame, last_frame, num_frames`` (the frames it
+        films, its own numbers); what an evaluation scores estimated time offsets against."""
+        return self.clocks.table(self.sequence)
 
     def summary(self) -> dict[str, float | int]:
         """Counts and realised noise rates (for logs and asset metadata)."""
@@ -102,6 +122,7 @@ class SyntheticScene:
             "people": int(self.person_ids.shape[0]),
             "views": len(self.rig),
             "frames": int(self.config.num_frames),
+            "reference_frames": int(self.keypoints_world_m.shape[1]),
             "detections": d.num_detections,
             "detection_rows": len(self.detections),
             "false_positives": int((~true_dets).sum()),
@@ -112,16 +133,17 @@ class SyntheticScene:
         }
 
 
-def _out_of_view(config: SceneConfig, rng: np.random.Generator) -> np.ndarray | None:
-    """(P, F) True where a person is out of every view (``config.out_of_view_spells``), or None for none."""
+def _out_of_view(config: SceneConfig, num_frames: int, rng: np.random.Generator) -> np.ndarray | None:
+    """(P, F) True where a person is out of every view (``config.out_of_view_spells``) in each of the ``num_frames``
+    reference frames, or None for none."""
     if config.out_of_view_spells <= 0:
         return None
-    hidden = np.zeros((config.num_people, config.num_frames), dtype=bool)
+    hidden = np.zeros((config.num_people, num_frames), dtype=bool)
     counts = rng.poisson(config.out_of_view_spells, config.num_people)
     for person, count in enumerate(counts):
         duration = np.round(rng.uniform(*OUT_OF_VIEW_DURATION_S, count) * config.fps).astype(int)
         # a spell may start before the first frame or end after the last (entering late, leaving early)
-        start = rng.integers(-duration // 2, config.num_frames - duration // 2)
+        start = rng.integers(-duration // 2, num_frames - duration // 2)
         for first, length in zip(start, duration):
             hidden[person, max(first, 0):max(first + length, 0)] = True
     return hidden
@@ -252,21 +274,23 @@ def generate_scene(
     # a sixth stream for the out-of-view spells leaves the first five (and older scenes) as they were
     # spawned streams do not depend on how many are spawned: a seventh (the detector's keypoint bias) leaves the
     # first six as they were
-    streams = np.random.default_rng(config.seed).spawn(7)
-    rng_people, rng_motion, rng_rig, rng_noise, rng_ids, rng_absence, rng_bias = streams
+    # an eighth (the views' clocks) leaves the first seven as they were; it is drawn from only for unsynced views
+    streams = np.random.default_rng(config.seed).spawn(8)
+    rng_people, rng_motion, rng_rig, rng_noise, rng_ids, rng_absence, rng_bias, rng_clocks = streams
     started = time.perf_counter()
+    clocks = draw_clocks(config, rng_clocks) if config.unsynced else synced_clocks(config)
 
     people = sample_people(body, config.num_people, rng_people, config.height_range_m)
     report("people", 0.1)
     with torch.no_grad():
         rest = body.rest_skeleton(torch.as_tensor(people.phenotypes, dtype=body.dtype, device=body.device))
     motions = generate_motions(
-        body, rest, config.num_frames, config.fps, config.area_size_m, rng_motion, behaviour=config.behaviour
+        body, rest, clocks.reference_frames, config.fps, config.area_size_m, rng_motion, behaviour=config.behaviour
     )
     report("motions", 0.4)
     rig = make_rig(config, rng_rig)
     report("cameras", 0.45)
-    hidden = _out_of_view(config, rng_absence)
+    hidden = _out_of_view(config, clocks.reference_frames, rng_absence)
     detected_m, bias_m = motions.keypoints_world_m, np.zeros((NUM_JOINTS, 3))
     if config.noise.keypoint_bias_m > 0:  # what the detector calls a joint: the model's keypoints moved in the bones
         bias_m = draw_keypoint_bias(config.noise.keypoint_bias_m, rng_bias)
@@ -277,7 +301,13 @@ def generate_scene(
                                                         device=body.device),
                                         torch.as_tensor(motions.root_translation_m, dtype=body.dtype,
                                                         device=body.device)).double().cpu().numpy()
-    detector = simulate_detections(detected_m, people.height_m, rig, config.noise, rng_noise, hidden)
+    if config.unsynced:
+        views = range(len(rig))
+        detector = simulate_view_detections([keypoints_at(detected_m, clocks, v) for v in views], list(clocks.frames),
+                                            people.height_m, rig, config.noise, rng_noise,
+                                            [hidden_at(hidden, clocks, v) for v in views])
+    else:
+        detector = simulate_detections(detected_m, people.height_m, rig, config.noise, rng_noise, hidden)
     det_id = _assign_det_ids(detector.frame, detector.view, rng_ids)
     report("detections", 0.8)
 
@@ -301,6 +331,7 @@ def generate_scene(
         detector=detector,
         det_id=det_id,
         keypoint_bias_m=bias_m,
+        clocks=clocks,
     )
     report("tables", 1.0)
     logger.info(
