@@ -59,7 +59,8 @@ def sequence_inputs(context: dg.AssetExecutionContext, body_model: BodyModelReso
     for name in sorted(key.path[-1] for key in context.selected_asset_keys):
         table, attr, _ = _OUTPUTS[name]
         df = getattr(inputs, attr)
-        yield table_output(df, table, output_name=name, rows=len(df))
+        notes = inputs.detections_notes if name == "raw_detections" else {}
+        yield table_output(df, table, output_name=name, rows=len(df), **notes)
     selected_checks = {key.name for key in context.selected_asset_check_keys}
     if "detections_plausible" in selected_checks:
         report = check_detections_plausible(inputs.detections, inputs.views)

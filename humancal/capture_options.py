@@ -1,4 +1,5 @@
-"""The options of a user's capture as text and values: image sizes and known principal points.
+"""The options of a user's capture as text and values: image sizes, known principal points, frame rates and time
+offsets.
 
 ``humancal.captures`` uses them for a datasets file's options, ``humancal add`` for its flags.
 """
@@ -11,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["camera_file_option", "is_size", "parse_image_size", "parse_principal_point", "principal_points_option"]
+__all__ = ["camera_file_option", "is_size", "named_numbers_option", "parse_image_size", "parse_named_numbers",
+           "parse_principal_point", "principal_points_option"]
 
 
 def parse_image_size(text: str, where: str = "image size") -> tuple[int, int]:
@@ -93,3 +95,54 @@ def camera_file_option(value: object, name: str, path: Callable[[object, str], P
     if not isinstance(value, dict) or "path" not in value or set(value) - set(allowed):
         raise ValueError(f"{name}: expected {{{', '.join(f'{k}: ...' for k in allowed)}}} with a path, got {value!r}")
     return {**value, "path": path(value["path"], f"{name}.path")}
+
+
+def parse_named_numbers(texts: Sequence[str], where: str, unit: str, *, positive: bool, allow_default: bool
+                        ) -> tuple[float | None, tuple[tuple[str, float], ...]]:
+    """Command-line values ``NAME=NUMBER`` (and, with ``allow_default``, one plain ``NUMBER`` for the views not
+    named), e.g. ``--fps 30 cam2=60`` or ``--time-offsets cam2=1.25``.
+
+    Returns:
+        ``(default, ((name, value), ...))``: the plain number (None when not given) and the named ones, in order.
+
+    Raises:
+        ValueError: a malformed entry, a name given twice, two plain numbers, a non-finite number, or (``positive``)
+            one that is not above 0 (the message names ``where``).
+    """
+    default: float | None = None
+    named: dict[str, float] = {}
+    form = f"NAME={unit}" + (f" or {unit}" if allow_default else "")
+    for text in texts:
+        name, sep, number = str(text).rpartition("=")
+        try:
+            value = float(number)
+        except ValueError:
+            value = float("nan")
+        if not np.isfinite(value) or (positive and value <= 0) or (sep and not name):
+            raise ValueError(f"{where}: expected {form}{' (a positive number)' if positive else ''}, got {text!r}")
+        if not sep:
+            if not allow_default or default is not None:
+                raise ValueError(f"{where}: expected {form}, got {text!r}"
+                                 + (" (a second plain number)" if allow_default else ""))
+            default = value
+        elif name in named:
+            raise ValueError(f"{where}: view {name!r} given twice")
+        else:
+            named[name] = value
+    return default, tuple(named.items())
+
+
+def named_numbers_option(value: object, where: str, *, positive: bool) -> tuple[tuple[str, float], ...]:
+    """A datasets-file option ``{view name: number, ...}`` as ``((name, value), ...)``.
+
+    Raises:
+        ValueError: not such a mapping of finite numbers (above 0 with ``positive``); the message names ``where``.
+    """
+    def number(x: object) -> bool:
+        return (isinstance(x, (int, float)) and not isinstance(x, bool) and bool(np.isfinite(x))
+                and (not positive or x > 0))
+
+    if not (isinstance(value, dict) and all(isinstance(k, str) and number(x) for k, x in value.items())):
+        kind = "positive numbers" if positive else "numbers"
+        raise ValueError(f"{where}: expected a mapping of view names to {kind}, got {value!r}")
+    return tuple((k, float(x)) for k, x in value.items())

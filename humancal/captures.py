@@ -12,13 +12,18 @@ file)::
                                       # (views: [cam2]: the file's cameras are those views'; refine: true)
     reference_cameras: {path: truth.toml}           # optional true cameras: evaluation only
     drop_views: [cam3]                # optional: views left out
-    fps: 30                           # optional
+    fps: 30                           # optional (default 30 where a frame rate is needed)
+    view_fps: {cam2: 60}              # optional: per-view frame rates (the others: fps)
+    unsynced: true                    # optional: the videos were started by hand (time offsets estimated)
+    time_offsets: {cam2: 1.25}        # optional: seconds, view v's frame n is at n / fps_v + offset_v
 
 Relative paths are relative to the datasets file's folder. Reading a capture checks what was declared against the
 detections (:func:`load_capture`: image sizes, a 25-point skeleton, the views), then drops (and counts) joints
 outside the image (negative or beyond the width/height: trackers extrapolate a few, no detector saw them) and
 placeholder person entries without keypoints; every problem is a :class:`~humancal.formats.FormatError` or
-``ValueError`` naming the file and the field, or the view and the option. Known cameras become the
+``ValueError`` naming the file and the field, or the view and the option. Unsynchronised views (``unsynced``,
+``time_offsets``, ``view_fps``) are moved to view 0's frames (:mod:`humancal.sync`) before the views are checked
+against each other. Known cameras become the
 ``known_cameras`` table (the method uses them); reference cameras the ``gt_cameras`` table (evaluation only).
 """
 
@@ -38,6 +43,7 @@ from humancal.capture_cameras import read_capture_cameras
 from humancal.capture_options import (
     camera_file_option,
     is_size,
+    named_numbers_option,
     parse_image_size,
     parse_principal_point,
     principal_points_option,
@@ -66,7 +72,9 @@ log = logging.getLogger(__name__)
 
 OPTION_NAMES: dict[str, str] = {"views": "views", "image_size": "image_size", "skeleton": "skeleton",
                                 "cameras_format": "cameras.format", "known_views": "cameras.views",
-                                "reference_cameras_format": "reference_cameras.format", "drop_views": "drop_views"}
+                                "reference_cameras_format": "reference_cameras.format", "drop_views": "drop_views",
+                                "fps": "fps", "view_fps": "view_fps", "unsynced": "unsynced",
+                                "time_offsets": "time_offsets"}
 """How messages name the capture options by default: as in a datasets file or ``capture.yaml``. The command line
 passes its flags instead (``load_capture(..., option_names=...)``)."""
 
@@ -90,7 +98,12 @@ class CaptureConfig:
             camera rows), or ``None``.
         reference_cameras_format: its format (``None``: from the file name).
         drop_views: names of views left out of the capture (e.g. one that cannot be calibrated).
-        fps: frames per second, when known.
+        fps: frames per second of every view, when known.
+        view_fps: (view name, frames per second) of the views whose rate differs from ``fps``.
+        unsynced: the views were started by hand: their time offsets are estimated from the people's motion
+            (:func:`humancal.sync.estimate_time_offsets`) unless ``time_offsets_s`` gives them.
+        time_offsets_s: (view name, seconds): view ``v``'s frame ``n`` is at reference time ``n / fps_v +
+            offset_v`` (views not named: 0); given by the user, or estimated by ``humancal add --unsynced``.
         principal_points_px: (V,) (cx_px, cy_px) per view when known (used by the calibration, which otherwise
             puts the principal point at the image centre), or ``None``.
     """
@@ -108,6 +121,14 @@ class CaptureConfig:
     reference_cameras: Path | None = None
     reference_cameras_format: str | None = None
     drop_views: tuple[str, ...] = ()
+    view_fps: tuple[tuple[str, float], ...] = ()
+    unsynced: bool = False
+    time_offsets_s: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def needs_sync(self) -> bool:
+        """Whether the views' frames must be moved to one clock (declared unsynced, offsets or per-view rates)."""
+        return self.unsynced or bool(self.time_offsets_s) or bool(self.view_fps)
 
     def __post_init__(self) -> None:
         if self.format not in DETECTION_FORMATS:
@@ -127,8 +148,14 @@ class CaptureConfig:
                 raise ValueError(f"{name}: expected one of {list(CAMERA_READ_FORMATS)}, got {fmt!r}")
         if self.cameras is None and (self.known_views is not None or self.refine_cameras):
             raise ValueError("cameras.views and cameras.refine need known cameras (cameras.path)")
-        if self.fps is not None and not self.fps > 0:
+        if self.fps is not None and not (np.isfinite(self.fps) and self.fps > 0):
             raise ValueError(f"fps: expected a positive number, got {self.fps!r}")
+        for name, pairs, positive in (("view_fps", self.view_fps, True), ("time_offsets", self.time_offsets_s, False)):
+            values = [v for _, v in pairs]
+            if len({n for n, _ in pairs}) != len(pairs) or not all(np.isfinite(v) and (v > 0 or not positive)
+                                                                    for v in values):
+                raise ValueError(f"{name}: expected one {'positive ' if positive else ''}number per named view, "
+                                 f"got {dict(pairs)!r}")
         if self.principal_points_px is not None:
             principal_points_option([list(p) for p in self.principal_points_px], self.image_sizes_px)
 
@@ -146,7 +173,7 @@ class CaptureConfig:
             return p if p.is_absolute() or base_dir is None else (base_dir / p)
 
         known = ("format", "views", "image_size", "skeleton", "cameras", "reference_cameras", "drop_views", "fps",
-                 "principal_point")
+                 "principal_point", "view_fps", "unsynced", "time_offsets")
         unknown = sorted(set(options) - set(known))
         if unknown:
             raise ValueError(f"unknown option(s) {unknown}; expected {', '.join(known)}")
@@ -169,6 +196,12 @@ class CaptureConfig:
         if views_known is not None and not (isinstance(views_known, list) and all(isinstance(n, str)
                                                                                    for n in views_known)):
             raise ValueError(f"cameras.views: expected a list of view names, got {views_known!r}")
+        fps = options.get("fps")
+        if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float))):
+            raise ValueError(f"fps: expected a number (frames per second; per view: view_fps), got {fps!r}")
+        unsynced = options.get("unsynced", False)
+        if not isinstance(unsynced, bool):
+            raise ValueError(f"unsynced: expected true or false, got {unsynced!r}")
         return cls(
             format=options.get("format", "openpose"),
             views=tuple(path(v, f"views[{i}]") for i, v in enumerate(views)),
@@ -181,7 +214,10 @@ class CaptureConfig:
             reference_cameras=reference.get("path"),
             reference_cameras_format=reference.get("format"),
             drop_views=tuple(drop),
-            fps=options.get("fps"),
+            fps=fps,
+            view_fps=named_numbers_option(options.get("view_fps", {}), "view_fps", positive=True),
+            unsynced=unsynced,
+            time_offsets_s=named_numbers_option(options.get("time_offsets", {}), "time_offsets", positive=False),
             principal_points_px=(principal_points_option(options["principal_point"], sizes)  # type: ignore[arg-type]
                                  if options.get("principal_point") is not None else None),
         )
@@ -212,6 +248,12 @@ class CaptureConfig:
             options["drop_views"] = list(self.drop_views)
         if self.fps is not None:
             options["fps"] = float(self.fps)
+        if self.view_fps:
+            options["view_fps"] = {name: float(value) for name, value in self.view_fps}
+        if self.unsynced:
+            options["unsynced"] = True
+        if self.time_offsets_s:
+            options["time_offsets"] = {name: float(value) for name, value in self.time_offsets_s}
         if self.principal_points_px is not None:
             points = {tuple(p) for p in self.principal_points_px}
             options["principal_point"] = (list(points.pop()) if len(points) == 1
@@ -234,6 +276,8 @@ class CaptureSummary:
         reference_cameras: whether reference cameras come with it (evaluation only).
         total_frames: frames with a detection in any view.
         warnings: input that is probably wrong but usable, one line each (checks of ``load_capture``).
+        sync: how unsynchronised views were put on view 0's clock (``humancal.sync.capture.CaptureSync``), or None
+            (the views are in sync).
     """
 
     names: tuple[str, ...]
@@ -246,6 +290,7 @@ class CaptureSummary:
     reference_cameras: bool = False
     total_frames: int = 0
     warnings: tuple[str, ...] = ()
+    sync: Any = None
 
     def lines(self) -> list[str]:
         """The summary in words, one line per view and a last line for the capture."""
@@ -256,6 +301,8 @@ class CaptureSummary:
                 zip(self.names, self.frames, self.detections, self.placeholders, self.off_image_joints)
             )
         ]
+        if self.sync is not None:
+            out = [f"{line}, {self.sync.view_text(v)}" for v, line in enumerate(out)]
         if len(self.known_cameras) == len(self.names):
             cams = "every camera known (used instead of a calibration)"
         elif self.known_cameras:
@@ -266,6 +313,12 @@ class CaptureSummary:
             cams += "; reference cameras given (evaluation only)"
         out.append(f"  {len(self.names)} views, {self.total_frames} frames, {sum(self.detections)} detections, "
                    f"skeleton {self.skeleton}, {cams}")
+        if self.sync is not None:
+            out.append(f"  views put on one clock (the first view's frames), time offsets {self.sync.source}")
+            unchecked = [n for n, st in zip(self.names, self.sync.status) if st == "unchecked"]
+            if unchecked:
+                out.append(f"  warning: the time offsets of {', '.join(unchecked)} rest on one pair of views only "
+                           f"(not cross-checked by a third view)")
         return out + [f"  warning: {w}" for w in self.warnings]
 
 
@@ -334,6 +387,13 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
         log.warning("%s: dropped %d joints outside the image (per view %s)", sequence, int(off.sum()),
                     off_per_view.to_dict())
     detections = table.loc[~off].reset_index(drop=True)
+    sync = None
+    if config.needs_sync:
+        from humancal.sync.capture import synchronise_views
+
+        detections, sync = synchronise_views(
+            detections, view_names, fps=config.fps, view_fps=config.view_fps, unsynced=config.unsynced,
+            time_offsets_s=config.time_offsets_s, option_names=names)
     warnings += check_views(detections, view_names, names["views"])
     views = validate_table(pd.DataFrame({
         "sequence": sequence, "view": np.arange(V), "name": view_names,
@@ -361,6 +421,7 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
         reference_cameras=config.reference_cameras is not None,
         total_frames=int(detections["frame"].nunique()),
         warnings=tuple(warnings),
+        sync=sync,
     )
     capture = Capture(detections=detections, views=views, gt_cameras=gt_cameras, summary=summary,
                       known_cameras=known_cameras)
@@ -393,6 +454,7 @@ def _drop_views(capture: Capture, drop: tuple[str, ...], option: str) -> Capture
         summary, names=pick(summary.names), frames=pick(summary.frames), detections=pick(summary.detections),
         placeholders=pick(summary.placeholders), off_image_joints=pick(summary.off_image_joints),
         known_cameras=tuple(n for n in summary.known_cameras if n not in drop),
+        sync=summary.sync.pick(keep) if summary.sync is not None else None,
         warnings=summary.warnings + (f"views {list(drop)} left out ({option})",))
     return Capture(renumber(capture.detections), renumber(capture.views), renumber(capture.gt_cameras), summary,
                    renumber(capture.known_cameras))

@@ -39,6 +39,8 @@ class SequenceInputs:
             with; empty where unknown; evaluation only).
         known_cameras: the cameras a user's capture brings for the method to use (some views or all; empty: the
             cameras are calibrated from the people).
+        detections_notes: what was done to the detections on loading, as text for the detections' metadata (an
+            unsynchronised capture: its views' time offsets); empty when nothing was.
     """
 
     detections: pd.DataFrame
@@ -49,11 +51,19 @@ class SequenceInputs:
     gt_people: pd.DataFrame
     gt_motions: pd.DataFrame = field(default_factory=lambda: empty_table("motions"))
     known_cameras: pd.DataFrame = field(default_factory=lambda: empty_table("cameras"))
+    detections_notes: dict[str, str] = field(default_factory=dict)
 
 
 def sequence_fps(spec: SequenceSpec) -> tuple[float, str]:
     """The frame rate of a sequence, frames per second, and where it comes from: its datasets entry's ``fps``
-    option, a synthetic preset's rate, or :data:`DEFAULT_FPS` (Shelf's files do not state one)."""
+    option (a capture whose ``view_fps`` names its first view: that view's, the clock its views are put on), a
+    synthetic preset's rate, or :data:`DEFAULT_FPS` (Shelf's files do not state one)."""
+    view_fps = spec.options.get("view_fps")
+    if spec.kind == "capture" and isinstance(view_fps, dict) and spec.options.get("views"):
+        first = Path(str(spec.options["views"][0]))
+        name = first.stem if spec.options.get("format") == "coco" else first.name
+        if name in view_fps:
+            return float(view_fps[name]), f"the capture options of {spec.key} (view_fps of its first view, {name})"
     if spec.options.get("fps") is not None:
         return float(spec.options["fps"]), f"the {spec.kind} options of {spec.key}"
     if spec.kind == "synthetic":
@@ -162,6 +172,8 @@ def _load_capture(spec: SequenceSpec) -> SequenceInputs:
         gt_associations=empty_table("associations"),
         gt_people=empty_table("people"),
         known_cameras=capture.known_cameras,
+        detections_notes=(capture.summary.sync.metadata(capture.summary.names)
+                          if capture.summary.sync is not None else {}),
     )
 
 

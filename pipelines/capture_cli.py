@@ -3,7 +3,8 @@
     humancal add NAME --openpose DIR [DIR ...] --image-size WxH [WxH ...] [--skeleton S]
                       [--cameras FILE [--cameras-format F] [--known-views NAME ...] [--refine-cameras]]
                       [--reference-cameras FILE [--reference-cameras-format F]] [--drop-view NAME ...]
-                      [--fps FPS] [--sequence SEQ]
+                      [--fps FPS|NAME=FPS ...] [--unsynced | --time-offsets NAME=SECONDS ...]
+                      [--sequence SEQ]
     humancal add NAME --coco FILE [FILE ...] --image-size WxH [...]
 
 Everything is checked first: every file is read once, and an error names the file and the field, or the view and
@@ -57,7 +58,16 @@ def add_parser(subparsers) -> None:
                    help="format of --reference-cameras (default: from the file name)")
     p.add_argument("--drop-view", action="append", metavar="NAME", default=[],
                    help="leave this view (folder or file name) out of the capture (repeatable)")
-    p.add_argument("--fps", type=float, help="frames per second")
+    p.add_argument("--fps", nargs="+", metavar="FPS|NAME=FPS",
+                   help="frames per second: one for all views (e.g. 30), and/or per view by name (e.g. cam2=60); "
+                        "views of other rates are put on the first view's frames (nearest frame)")
+    sync = p.add_mutually_exclusive_group()
+    sync.add_argument("--unsynced", action="store_true",
+                      help="the videos were started by hand (frame n of one view is not frame n of another): "
+                           "estimate each view's time offset from the people's motion, report it and store it")
+    sync.add_argument("--time-offsets", nargs="+", metavar="NAME=SECONDS",
+                      help="known time offsets: view NAME's frame n was taken at n / fps + SECONDS on the first "
+                           "view's clock (views not named: 0)")
     p.add_argument("--principal-point", nargs="+", metavar="CX,CY",
                    help="known principal point in pixels, e.g. 963.5,541.2: one for all views or one per view "
                         "(default: the image centre, which the calibration then assumes)")
@@ -67,6 +77,9 @@ def add_parser(subparsers) -> None:
 
 def cmd_add(args: argparse.Namespace) -> int:
     """Validate the capture, write it into the user datasets file, register its partition, print a summary."""
+    import dataclasses
+
+    from humancal.capture_options import parse_named_numbers
     from humancal.captures import CaptureConfig, load_capture, parse_image_size, parse_principal_point
     from humancal.sequences import (
         DatasetsConfigError,
@@ -95,6 +108,10 @@ def cmd_add(args: argparse.Namespace) -> int:
                                ("--reference-cameras-format", args.reference_cameras_format, args.reference_cameras)):
         if value and not needs:
             raise ValueError(f"{flag}: given without --{'reference-' if 'reference' in flag else ''}cameras")
+    fps, view_fps = (parse_named_numbers(args.fps, "--fps", "FPS", positive=True, allow_default=True)
+                     if args.fps else (None, ()))
+    offsets = (parse_named_numbers(args.time_offsets, "--time-offsets", "SECONDS", positive=False,
+                                   allow_default=False)[1] if args.time_offsets else ())
     config = CaptureConfig(
         format="openpose" if args.openpose else "coco",
         views=tuple(views),
@@ -107,7 +124,10 @@ def cmd_add(args: argparse.Namespace) -> int:
         reference_cameras=args.reference_cameras.expanduser().resolve() if args.reference_cameras else None,
         reference_cameras_format=args.reference_cameras_format,
         drop_views=tuple(args.drop_view),
-        fps=args.fps,
+        fps=fps,
+        view_fps=view_fps,
+        unsynced=args.unsynced,
+        time_offsets_s=offsets,
         principal_points_px=tuple(points) if points else None,
     )
     key = partition_key(args.name, args.sequence)
@@ -115,8 +135,15 @@ def cmd_add(args: argparse.Namespace) -> int:
         raise DatasetsConfigError(f"partition {key} exists; choose another NAME or --sequence")
     flags = {"views": "--openpose" if args.openpose else "--coco", "image_size": "--image-size",
              "skeleton": "--skeleton", "cameras_format": "--cameras-format", "known_views": "--known-views",
-             "reference_cameras_format": "--reference-cameras-format", "drop_views": "--drop-view"}
+             "reference_cameras_format": "--reference-cameras-format", "drop_views": "--drop-view",
+             "fps": "--fps", "view_fps": "--fps", "unsynced": "--unsynced", "time_offsets": "--time-offsets"}
     capture = load_capture(config, args.sequence, option_names=flags)
+    sync = capture.summary.sync
+    if config.unsynced and sync is not None:
+        # stored, so that `humancal update` applies these offsets (and the user can read and edit them) rather
+        # than estimating them again
+        config = dataclasses.replace(config, time_offsets_s=tuple(
+            (name, round(offset, 6)) for name, offset in zip(capture.summary.names, sync.offset_s)))
     spec = add_user_sequence(args.name, args.sequence, "capture", config.to_options())
     register_capture_partition(spec.key)
     print(f"registered {spec.key} in {user_config_path()}:")

@@ -496,3 +496,100 @@ def test_coco_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, mo
     args = ["--coco", *map(str, files), "--image-size", "1920x1080"]
     estimated = _calibrate_and_compare("cocolab__capture", args, tmp_path, monkeypatch, capsys)
     _assert_close_to_truth(estimated, truth, "coco capture", capsys)
+
+
+# --- unsynchronised videos ---------------------------------------------------------------------------------------
+
+
+def _write_unsynced_capture(root: Path, body_model, starts=(20, 0, 45, 33, 7, 60, 12), num_frames: int = 291):
+    """A synthetic 7-view scene whose cameras were started by hand: view v films ``num_frames`` frames from its
+    own start, numbered from 0 (offset ``(starts[v] - starts[0]) / 30`` s)."""
+    import pandas as pd
+
+    from humancal.formats import write_openpose
+    from humancal.synthetic import generate_scene, preset
+
+    scene = generate_scene(preset("demo", num_views=7, num_people=4, num_frames=351, seed=109), body_model,
+                           sequence="capture")
+    parts = []
+    for v, start in enumerate(starts):
+        d = scene.detections
+        d = d[(d["view"] == v) & (d["frame"] >= start) & (d["frame"] < start + num_frames)].copy()
+        d["frame"] = (d["frame"] - start).astype("int32")
+        parts.append(d)
+    folders = write_openpose(pd.concat(parts, ignore_index=True), root / "op")
+    return [str(f) for f in folders.values()], np.asarray(starts) - starts[0]
+
+
+def test_unsynced_offsets_that_one_pair_of_views_alone_gives_are_refused_with_the_estimate(tmp_path, state, capsys,
+                                                                                          body_model):
+    """Seven views started by hand, four of whose offsets rest on one pair of views each: nothing is stored, and the
+    refusal shows each of those views' estimate (the true offset here) and the flag that gives it."""
+    import re
+
+    views, truth = _write_unsynced_capture(tmp_path, body_model)
+    assert _add("hand", "--openpose", *views, "--image-size", "1920x1080", "--skeleton", "body25", "--fps", "30",
+                "--unsynced") == 2
+    err = capsys.readouterr().err
+    assert "--time-offsets" in err and "one pair of views only" in err
+    shown = {int(v): float(s) for v, s in re.findall(r"view (\d) \(view_\d\d, ([-+.\d]+) s\?\)", err)}
+    assert len(shown) >= 1
+    for view, seconds in shown.items():
+        assert round(seconds * 30) == truth[view], (view, seconds)
+    assert not _user_file(state).exists() or "hand" not in yaml.safe_load(_user_file(state).read_text())["datasets"]
+
+
+def test_given_time_offsets_and_per_view_fps_are_stored_and_applied(tmp_path, state, capsys, body_model):
+    from humancal.inputs import load_sequence_inputs, sequence_fps
+    from humancal.sequences import load_datasets_config
+
+    views, truth = _write_unsynced_capture(tmp_path, body_model)
+    names = [Path(v).name for v in views]
+    given = [f"{n}={t / 30:.6f}" for n, t in zip(names[1:], truth[1:])]
+    assert _add("given", "--openpose", *views, "--image-size", "1920x1080", "--skeleton", "body25",
+                "--fps", "30", f"{names[3]}=30", "--time-offsets", *given) == 0
+    out = capsys.readouterr().out
+    assert "time offsets given" in out
+    stored = yaml.safe_load(_user_file(state).read_text())["datasets"]["given"]["sequences"]["capture"]
+    assert "unsynced" not in stored and stored["view_fps"] == {names[3]: 30.0}
+    spec = load_datasets_config()["given__capture"]
+    inputs = load_sequence_inputs(spec, body_model=lambda: None, data_root=None)
+    assert inputs.detections.groupby("view")["frame"].min().loc[2] == truth[2]
+    assert inputs.detections_notes["time_offsets_source"] == "given"
+    assert sequence_fps(spec)[0] == 30.0
+
+
+def test_a_synced_capture_has_no_time_offsets(tmp_path, state, capsys):
+    views = _views(tmp_path / "op")
+    assert _add("synced", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25") == 0
+    assert "time offset" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args, needles", [
+    (["--fps", "0"], ["--fps: expected NAME=FPS or FPS (a positive number), got '0'"]),
+    (["--fps", "30", "25"], ["--fps: expected NAME=FPS or FPS, got '25' (a second plain number)"]),
+    (["--fps", "cam01=abc"], ["--fps: expected NAME=FPS or FPS (a positive number), got 'cam01=abc'"]),
+    (["--fps", "cam09=60"], ["--fps: ['cam09'] are not views of the capture"]),
+    (["--time-offsets", "1.5"], ["--time-offsets: expected NAME=SECONDS, got '1.5'"]),
+    (["--time-offsets", "cam02=x"], ["--time-offsets: expected NAME=SECONDS, got 'cam02=x'"]),
+    (["--time-offsets", "cam02=1", "cam02=2"], ["--time-offsets: view 'cam02' given twice"]),
+    (["--time-offsets", "camX=1"], ["--time-offsets: ['camX'] are not views of the capture"]),
+])
+def test_bad_sync_flags_are_errors_naming_the_flag(tmp_path, state, capsys, args, needles):
+    views = _views(tmp_path / "op")
+    assert _add("bad", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25", *args) == 2
+    _expect_error(capsys, state, *needles)
+
+
+def test_unsynced_and_time_offsets_together_are_refused(tmp_path, state, capsys):
+    views = _views(tmp_path / "op")
+    with pytest.raises(SystemExit):
+        _add("bad", "--openpose", *views, "--image-size", "640x480", "--unsynced", "--time-offsets", "cam02=1")
+    assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_unsynced_views_whose_people_do_not_move_are_refused_naming_the_view(tmp_path, state, capsys):
+    views = _views(tmp_path / "op", frames=90, views=3)
+    assert _add("still", "--openpose", *views, "--image-size", "640x480", "--skeleton", "body25", "--unsynced") == 2
+    _expect_error(capsys, state, "view 1 (cam02), view 2 (cam03): the time offset is ambiguous",
+                  "--time-offsets cam02=SECONDS cam03=SECONDS")

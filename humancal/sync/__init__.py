@@ -1,0 +1,37 @@
+"""Unsynchronised videos: each view's time offset estimated from the people's motion, and the detections moved to
+one clock (``docs/capture.md``, "Unsynchronised videos").
+
+Example:
+    >>> from humancal.sync import SyncConfig, apply_time_offsets, estimate_time_offsets
+    >>> offsets = estimate_time_offsets(detections, fps=30.0, lifter=lifter)  # doctest: +SKIP
+    >>> offsets.status, offsets.offset_frames  # doctest: +SKIP
+    (('ok', 'ok', 'ok'), array([ 0., 12., -7.]))
+    >>> synced = apply_time_offsets(detections, offsets.offset_s, 30.0)  # doctest: +SKIP
+"""
+
+from humancal.sync.apply import AppliedOffsets, apply_time_offsets
+from humancal.sync.offsets import (
+    STATUSES,
+    PairOffset,
+    SyncConfig,
+    TimeOffsets,
+    estimate_time_offsets,
+    per_view_fps,
+)
+from humancal.sync.signals import SIGNAL_KINDS, TrackSignals, track_signals
+from humancal.sync.tracks import link_view_tracks
+
+__all__ = [
+    "STATUSES",
+    "SIGNAL_KINDS",
+    "AppliedOffsets",
+    "TrackSignals",
+    "PairOffset",
+    "SyncConfig",
+    "TimeOffsets",
+    "apply_time_offsets",
+    "estimate_time_offsets",
+    "link_view_tracks",
+    "track_signals",
+    "per_view_fps",
+]

@@ -1,0 +1,172 @@
+"""A capture's views put on one clock: the time offsets given or estimated, checked, and applied to its detections
+(what :func:`humancal.captures.load_capture` does for a capture declared unsynchronised)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from humancal.sync.apply import apply_time_offsets
+from humancal.sync.offsets import SyncConfig, TimeOffsets, estimate_time_offsets
+
+__all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "synchronise_views"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_SYNC_FPS = 30.0
+"""The frame rate assumed for a view whose rate the capture does not state (``humancal.inputs.DEFAULT_FPS``)."""
+
+
+@dataclass(frozen=True)
+class CaptureSync:
+    """How a capture's views were put on view 0's clock.
+
+    Attributes:
+        source: ``"estimated"`` (from the people's motion, now), ``"estimated by humancal add"`` (stored then) or
+            ``"given"``.
+        fps: (V,) frames per second of each view.
+        offset_s: (V,) time offsets, seconds (view 0: 0).
+        offset_frames: (V,) the same in reference frames.
+        status: (V,) ``"ok"`` (estimated and cross-checked) or ``"given"`` (an unchecked or ambiguous estimate is
+            refused, never stored).
+        confidence: (V,) the estimate's margin (NaN where given).
+        residual_frames: (V,) the largest sub-frame remainder rounded away, reference frames.
+        dropped_frames: (V,) frames with detections dropped (outside view 0's frames, or merged).
+        reference_fps: the reference clock's frames per second (view 0's, before any view was left out).
+    """
+
+    source: str
+    fps: tuple[float, ...]
+    offset_s: tuple[float, ...]
+    offset_frames: tuple[float, ...]
+    status: tuple[str, ...]
+    confidence: tuple[float, ...]
+    residual_frames: tuple[float, ...]
+    dropped_frames: tuple[int, ...]
+    reference_fps: float = DEFAULT_SYNC_FPS
+
+    def pick(self, views: Sequence[int]) -> CaptureSync:
+        """The same for the views ``views`` only (after some were left out)."""
+        def sub(values: tuple) -> tuple:
+            return tuple(values[v] for v in views)
+
+        return CaptureSync(self.source, sub(self.fps), sub(self.offset_s), sub(self.offset_frames), sub(self.status),
+                           sub(self.confidence), sub(self.residual_frames), sub(self.dropped_frames),
+                           self.reference_fps)
+
+    def view_text(self, v: int) -> str:
+        """View ``v``'s offset in words, for the capture summary."""
+        text = f"time offset {self.offset_s[v]:+.3f} s ({self.offset_frames[v]:+.2f} frames at {self.reference_fps:g} fps"
+        if self.status[v] != "given":
+            text += f", {self.status[v]}, confidence {self.confidence[v]:.2f}"
+        text += ")"
+        if self.fps[v] != self.reference_fps:
+            text += f", {self.fps[v]:g} fps"
+        if self.residual_frames[v] > 1e-6:
+            text += f", up to {self.residual_frames[v]:.2f} frame rounded"
+        if self.dropped_frames[v]:
+            text += f", {self.dropped_frames[v]} frames outside view 0's dropped"
+        return text
+
+    def metadata(self, names: Sequence[str]) -> dict[str, str]:
+        """The offsets as text, for an asset's metadata (view names as keys)."""
+        return {"time_offsets_source": self.source,
+                **{f"time_offset_{name}": self.view_text(v) for v, name in enumerate(names)}}
+
+
+def _per_view(names: Sequence[str], default: float, named: Sequence[tuple[str, float]], option: str) -> np.ndarray:
+    known = dict(named)
+    unknown = sorted(set(known) - set(names))
+    if unknown:
+        raise ValueError(f"{option}: {unknown} are not views of the capture (its views: {list(names)})")
+    return np.array([known.get(n, default) for n in names], dtype=float)
+
+
+def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: float | None,
+                      view_fps: Sequence[tuple[str, float]], unsynced: bool,
+                      time_offsets_s: Sequence[tuple[str, float]], option_names: Mapping[str, str],
+                      lifter_factory=None, config: SyncConfig = SyncConfig()) -> tuple[pd.DataFrame, CaptureSync]:
+    """Move a capture's detections to view 0's frames.
+
+    The offsets are ``time_offsets_s`` where given (``unsynced`` then says they were estimated by ``humancal add``),
+    else estimated (``unsynced``), else 0 (only the frame rates differ).
+
+    Args:
+        detections: canonical ``detections`` table, each view on its own frames.
+        names: (V,) view names.
+        fps: the frame rate of the views ``view_fps`` does not name (None: :data:`DEFAULT_SYNC_FPS`).
+        view_fps: (name, frames per second) per view.
+        unsynced: whether the views were started by hand.
+        time_offsets_s: (name, seconds) per view (views not named: 0).
+        option_names: how messages name the options (keys ``fps``, ``view_fps``, ``unsynced``, ``time_offsets``).
+        lifter_factory: returns the :class:`humancal.lifter.Lifter` the estimate uses (default: the shipped one).
+        config: the search.
+
+    Returns:
+        ``(detections on view 0's frames, how)``.
+
+    Raises:
+        ValueError: a name that is no view, or an estimated offset that is ambiguous or unchecked (the message
+            names the view and how to give its offset).
+    """
+    rates = _per_view(names, DEFAULT_SYNC_FPS if fps is None else float(fps), view_fps, option_names["view_fps"])
+    V = len(names)
+    if time_offsets_s:
+        offsets = _per_view(names, 0.0, time_offsets_s, option_names["time_offsets"])
+        source = "estimated by humancal add" if unsynced else "given"
+        status = ("given",) * V
+        confidence = np.full(V, np.nan)
+    elif unsynced:
+        if lifter_factory is None:
+            from humancal.lifter import load_lifter, shipped_checkpoint
+
+            def lifter_factory():
+                return load_lifter(shipped_checkpoint())
+
+        estimate = estimate_time_offsets(detections, rates, lifter=lifter_factory(), config=config)
+        _refuse_unusable(estimate, names, option_names, config)
+        offsets, source, status, confidence = estimate.offset_s, "estimated", estimate.status, estimate.confidence
+    else:
+        offsets = np.zeros(V)
+        source, status, confidence = "given", ("given",) * V, np.full(V, np.nan)
+    applied = apply_time_offsets(detections, offsets, rates)
+    sync = CaptureSync(source, tuple(map(float, rates)), tuple(map(float, offsets)),
+                       tuple(float(o * rates[0]) for o in offsets), tuple(status), tuple(map(float, confidence)),
+                       tuple(map(float, applied.residual_frames)), tuple(map(int, applied.dropped_frames)),
+                       float(rates[0]))
+    for v, name in enumerate(names):
+        log.info("view %d (%s): %s", v, name, sync.view_text(v))
+    return applied.detections, sync
+
+
+def _refuse_unusable(estimate: TimeOffsets, names: Sequence[str], option_names: Mapping[str, str],
+                     config: SyncConfig) -> None:
+    """Raise naming every view whose estimated offset is not cross-checked: ambiguous (no clear peak) or unchecked
+    (one pair of views alone places it, nothing confirms it: on the synthetic sweep such views were the ones used
+    one or more frames off)."""
+    ambiguous = estimate.ambiguous_views()
+    unchecked = [v for v, s in enumerate(estimate.status) if s == "unchecked"]
+    if not (ambiguous or unchecked):
+        return
+    option = option_names["time_offsets"]
+    parts = []
+    if ambiguous:
+        views = ", ".join(f"view {v} ({names[v]})" for v in ambiguous)
+        example = " ".join(f"{names[v]}=SECONDS" for v in ambiguous)
+        parts.append(
+            f"{views}: the time offset is ambiguous: the people's motion gives no clear peak within "
+            f"+-{config.max_offset_s:g} s of view 0 ({names[0]}) (people who hardly move, or a motion that repeats, "
+            f"like a steady walk). Film people moving (walking, stopping, turning, waving) in the shared field of "
+            f"view for longer, or give the offsets ({option} {example})")
+    if unchecked:
+        views = ", ".join(f"view {v} ({names[v]}, {estimate.offset_s[v]:+.3f} s?)" for v in unchecked)
+        example = " ".join(f"{names[v]}=SECONDS" for v in unchecked)
+        parts.append(
+            f"{views}: the time offset rests on one pair of views only, no other pair confirms it, so it is not "
+            f"used. Check the offset shown (a clap, a flash, the files' timestamps) and give it ({option} "
+            f"{example}), or film people moving where more cameras see them")
+    raise ValueError(". ".join(parts))

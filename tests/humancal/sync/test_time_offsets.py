@@ -1,0 +1,166 @@
+"""Time offsets of unsynchronised views from the people's motion: exact to the frame on synthetic scenes shifted by
+known frames, refused (ambiguous) when nobody moves, and the detections moved to view 0's clock."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from humancal.sync import SyncConfig, apply_time_offsets, estimate_time_offsets, link_view_tracks
+from humancal.sync.capture import synchronise_views
+
+
+@pytest.fixture(scope="module")
+def lifter():
+    from humancal.lifter import load_lifter, shipped_checkpoint
+
+    return load_lifter(shipped_checkpoint())
+
+
+def crop_views(detections: pd.DataFrame, starts, num_frames: int) -> pd.DataFrame:
+    """Each view films ``num_frames`` frames from its own start frame, numbered from 0 (a camera started by hand):
+    view v's offset is ``(starts[v] - starts[0]) / fps``."""
+    parts = []
+    for v, start in enumerate(starts):
+        d = detections[(detections["view"] == v) & (detections["frame"] >= start)
+                       & (detections["frame"] < start + num_frames)].copy()
+        d["frame"] = (d["frame"] - start).astype(detections["frame"].dtype)
+        parts.append(d)
+    return pd.concat(parts, ignore_index=True)
+
+
+@pytest.fixture(scope="module")
+def walking_scene(body_model):
+    from humancal.synthetic import generate_scene, preset
+
+    return generate_scene(preset("demo", num_views=7, num_people=4, num_frames=351, seed=109), body_model,
+                          sequence="walk")
+
+
+def test_integer_frame_offsets_are_found_exactly(walking_scene, lifter):
+    starts = np.array([20, 0, 45, 33, 7, 60, 12])
+    detections = crop_views(walking_scene.detections, starts, 291)
+    offsets = estimate_time_offsets(detections, 30.0, lifter=lifter)
+    truth = starts - starts[0]
+    assert offsets.status[0] == "ok" and offsets.offset_s[0] == 0.0
+    assert all(s in ("ok", "unchecked") for s in offsets.status), offsets.status
+    np.testing.assert_array_equal(np.round(offsets.offset_frames), truth)
+    assert np.abs(offsets.offset_frames - truth).max() < 0.5
+    np.testing.assert_allclose(offsets.offset_s, offsets.offset_frames / 30.0)
+    assert (offsets.confidence[offsets.confidence > 0] >= SyncConfig().min_margin).all()
+
+
+def test_applied_offsets_give_back_the_synchronised_detections(walking_scene, lifter):
+    starts = np.array([10, 0, 25, 3, 17, 40, 31])
+    shifted = crop_views(walking_scene.detections, starts, 291)
+    offsets = estimate_time_offsets(shifted, 30.0, lifter=lifter)
+    applied = apply_time_offsets(shifted, np.round(offsets.offset_frames) / 30.0, 30.0)
+    # on view 0's clock, view v's frame n is the scene's frame n + starts[0]: the rows of the original scene
+    expected = crop_views(walking_scene.detections, np.full(7, starts[0]), 291)
+    expected = expected[expected["frame"] <= shifted.loc[shifted["view"] == 0, "frame"].max()]
+    got = applied.detections.merge(expected, on=["sequence", "frame", "view", "det_id", "joint"], how="outer",
+                                   indicator=True)
+    both = got["_merge"] == "both"
+    assert (got["_merge"] != "left_only").all()  # every row moved lands on the scene's own frame
+    assert both.sum() > 0.85 * len(expected)  # the rest: frames a view did not film
+    np.testing.assert_array_equal(got.loc[both, "x_px_x"], got.loc[both, "x_px_y"])
+    assert applied.residual_frames.max() < 1e-6
+
+
+def test_people_standing_still_are_ambiguous_never_ok(body_model, lifter):
+    from humancal.synthetic import generate_scene, preset
+
+    scene = generate_scene(preset("demo", num_views=4, num_people=3, num_frames=150, seed=4), body_model,
+                           sequence="still")
+    # every person frozen in their first detected pose in each view (nobody moves; the detector's jitter stays)
+    d = scene.detections.copy()
+    rng = np.random.default_rng(0)
+    first = d[d["frame"] == d["frame"].min()]
+    frozen = [first.assign(frame=f) for f in range(150)]
+    still = pd.concat(frozen, ignore_index=True)
+    still["x_px"] += rng.normal(0, 1.5, len(still))
+    still["y_px"] += rng.normal(0, 1.5, len(still))
+    offsets = estimate_time_offsets(still, 30.0, lifter=lifter)
+    assert offsets.status[1:] == ("ambiguous",) * 3, offsets.status
+    assert np.isnan(offsets.offset_s[1:]).all()
+    with pytest.raises(ValueError, match=r"view 1 \(b\).*ambiguous.*--time-offsets b=SECONDS"):
+        synchronise_views(still, ["a", "b", "c", "d"], fps=30.0, view_fps=(), unsynced=True, time_offsets_s=(),
+                          option_names={"view_fps": "--fps", "time_offsets": "--time-offsets"},
+                          lifter_factory=lambda: lifter)
+
+
+def test_offsets_on_the_generators_unsynchronised_clocks(body_model, lifter):
+    from humancal.synthetic import SceneConfig, generate_scene, preset
+
+    if "time_offset_range_s" not in SceneConfig.__dataclass_fields__:
+        pytest.skip("the synthetic generator has no time offsets yet")
+    scene = generate_scene(preset("demo", num_views=6, num_people=4, num_frames=300, seed=109,
+                                  time_offset_range_s=(-1.5, 1.5)), body_model, sequence="clocks")
+    truth = scene.clocks.time_offset_s * 30.0
+    offsets = estimate_time_offsets(scene.detections, scene.clocks.fps, lifter=lifter)
+    used = np.array([s != "ambiguous" for s in offsets.status])
+    assert used.sum() >= 2  # view 0 and at least one other; an ambiguous view is refused, never used
+    np.testing.assert_array_equal(np.round(offsets.offset_frames[used]), np.round(truth[used]))
+
+
+# --- applying offsets -----------------------------------------------------------------------------------------------
+
+
+def _table(rows):
+    return pd.DataFrame(rows, columns=["sequence", "frame", "view", "det_id", "joint", "x_px", "y_px", "score"]
+                        ).astype({"frame": "int32", "view": "int32", "det_id": "int32"})
+
+
+def test_apply_renumbers_integer_offsets_and_drops_frames_outside_view_0():
+    rows = [("s", f, v, 0, "nose", float(f), float(v), 0.9) for v in range(2) for f in range(10)]
+    out = apply_time_offsets(_table(rows), [0.0, 3 / 30], 30.0)
+    v1 = out.detections[out.detections["view"] == 1]
+    assert v1["frame"].tolist() == list(range(3, 10))  # view 1's frame n is view 0's n + 3; 7..9 fall past frame 9
+    assert v1["x_px"].tolist() == [float(f) for f in range(7)]
+    assert out.dropped_frames.tolist() == [0, 3]
+    assert out.detections["frame"].dtype == np.int32
+    pd.testing.assert_frame_equal(out.detections[out.detections["view"] == 0].reset_index(drop=True),
+                                  _table(rows[:10]))
+
+
+def test_apply_rounds_sub_frame_offsets_and_reports_the_remainder():
+    rows = [("s", f, v, 0, "nose", float(f), 0.0, 0.9) for v in range(2) for f in range(10)]
+    out = apply_time_offsets(_table(rows), [0.0, -2.3 / 30], 30.0)
+    assert out.detections.loc[out.detections["view"] == 1, "frame"].tolist() == list(range(8))
+    np.testing.assert_allclose(out.residual_frames, [0.0, 0.3], atol=1e-9)
+
+
+def test_apply_a_faster_view_keeps_the_nearest_frame_per_reference_frame():
+    rows = [("s", f, 0, 0, "nose", float(f), 0.0, 0.9) for f in range(10)]
+    rows += [("s", f, 1, 0, "nose", float(f), 0.0, 0.9) for f in range(20)]
+    out = apply_time_offsets(_table(rows), [0.0, 0.0], [30.0, 60.0])
+    v1 = out.detections[out.detections["view"] == 1]
+    assert v1["frame"].tolist() == list(range(10))
+    assert v1["x_px"].tolist() == [2.0 * f for f in range(10)]  # 60 fps frame 2n is at 30 fps frame n exactly
+    assert out.dropped_frames[1] == 10
+
+
+def test_bad_offsets_are_refused():
+    rows = [("s", 0, v, 0, "nose", 1.0, 1.0, 0.9) for v in range(3)]
+    with pytest.raises(ValueError, match="one offset per view"):
+        apply_time_offsets(_table(rows), [0.0, 1.0], 30.0)
+    with pytest.raises(ValueError, match="finite"):
+        apply_time_offsets(_table(rows), [0.0, np.nan, 0.0], 30.0)
+    with pytest.raises(ValueError, match="positive frame rates"):
+        apply_time_offsets(_table(rows), [0.0, 0.0, 0.0], [30.0, 0.0, 30.0])
+    with pytest.raises(ValueError, match="max_offset_s"):
+        SyncConfig(max_offset_s=0)
+
+
+def test_tracks_follow_each_person_in_a_view(walking_scene):
+    from humancal.detections import detections_to_dense
+
+    dense = detections_to_dense(walking_scene.detections)
+    track = link_view_tracks(dense, 0)
+    truth = walking_scene.associations.set_index(["frame", "view", "det_id"])["person_id"].reindex(
+        pd.MultiIndex.from_arrays([dense.frame, dense.view, dense.det_id])).to_numpy()
+    mine = (dense.view == 0) & (track >= 0) & (truth >= 0)
+    # a track is one person: its detections are that person's (false positives and rare switches aside)
+    purity = [np.bincount(truth[mine & (track == t)]).max() / (mine & (track == t)).sum()
+              for t in np.unique(track[mine])]
+    assert np.median(purity) == 1.0
+    assert np.mean(purity) > 0.95
