@@ -156,7 +156,7 @@ def _upright_report(table: pd.DataFrame) -> CheckReport:
 
 @sequence_asset(
     "cameras",
-    code_version="11",
+    code_version="12",
     check_specs=[
         dg.AssetCheckSpec("cameras_valid", asset="extrinsics", blocking=True,
                           description="finite positive focal, principal point inside, right-handed rotations"),
@@ -185,8 +185,9 @@ def extrinsics(
     views: pd.DataFrame,
     known_cameras: pd.DataFrame,
 ):
-    """The calibrated cameras: rotations from aligned lifted poses, translations, focal lengths refined (and
-    recovered where single views could not observe them) by a multi-view bundle adjustment, every view checked
+    """The calibrated cameras: rotations from aligned lifted poses, translations, focal lengths and each lens's
+    radial distortion refined (focal lengths recovered where single views could not observe them) by a multi-view
+    bundle adjustment, every view checked
     against the people the others triangulate (and placed again where it disagrees); world Z up, floor at z = 0,
     metric scale from the people's limbs. A capture's known cameras are used as given (all views known) or as
     anchors (some views: the world is theirs); they enter as pinholes (their detections were undistorted)."""
@@ -224,6 +225,7 @@ def extrinsics(
         regroup_detections=" -> ".join(map(str, result.diagnostics.regroup_detections)),
         scale_factor=float(result.diagnostics.scale_factor),
         views_repaired=", ".join(map(str, np.flatnonzero(per_view["reregistered"].to_numpy()))) or "none",
+        lens=result.diagnostics.lens.reason if result.diagnostics.lens is not None else "known cameras",
     )
     rig = check_rig_geometry(table, people, floor_known=floor is not None)
     views_agree = check_views_agree(per_view, _view_names(views, len(table)))

@@ -14,7 +14,7 @@ from humancal.validation import check_views_agree
 
 @sequence_asset(
     "cameras",
-    code_version="1",
+    code_version="2",
     check_specs=[dg.AssetCheckSpec("views_agree", asset="final_cameras", blocking=True,
                                    description="every view of the final cameras agrees with the people the other "
                                                "views triangulate (the association's people)")],

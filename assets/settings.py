@@ -131,6 +131,9 @@ class ExtrinsicsSettings(dg.Config):
     scale_from_limbs: bool = library_field(_E, "scale_from_limbs")
     max_loo_sigma: float = library_field(_E, "max_loo_sigma")
     min_explained_fraction: float = library_field(_E, "min_explained_fraction")
+    lens_models: list[str] = library_field(_E, "lens_models")
+    principal_point: str = library_field(_E, "principal_point")
+    lens_min_gain: float = library_field(_E, "lens_min_gain")
 
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""

@@ -2,13 +2,19 @@
 parameterization, the whitened residuals, the Huber weights and robust cost, and the normal equations with their
 Schur-complement solve over the per-group point blocks.
 
+A view's parameter block is ``[focal (1: fx = fy, or 2: log fx, log fy, bounded), rotation increment (3),
+translation (3)]``, followed, when the problem models the lens (``_Problem.lens``), by ``[k1, k2, dcx, dcy]``: OpenCV's
+radial coefficients on the normalised image coordinates ``(x / z, y / z)`` and the principal point's offset from the
+one given, pixels. A lens parameter moves only where ``free`` lets it; each has a zero-mean Gaussian prior
+(``lens_prior_w``, 1 / std) that keeps a weakly observed one near the pinhole at the image centre.
+
 Internal to the calibration package: :func:`humancal.calibration.multiview_focal.bundle_adjust` is the entry point
 and states the model.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,10 +58,27 @@ class _Problem:
     # per-group scale of the lifted poses (log q, q = lifted size / true size): prior weight, or fixed at 0
     scale_w: float = 0.0
     free_scale: bool = False
+    # lens parameters (k1, k2, dcx, dcy) after the pose in every camera block, with their prior weights (1 / std)
+    lens: bool = False
+    lens_prior_w: np.ndarray = field(default_factory=lambda: np.zeros(4))
+
+
+LENS_PARAMS = ("k1", "k2", "dcx_px", "dcy_px")
+"""The lens parameters of a camera block, in order."""
+
+
+def _focal_count(p: _Problem) -> int:
+    return 1 if p.square else 2
 
 
 def _camera_params(p: _Problem) -> int:
-    return (1 if p.square else 2) + 6
+    return _focal_count(p) + 6 + (len(LENS_PARAMS) if p.lens else 0)
+
+
+def _lens(p: _Problem, cams: np.ndarray) -> np.ndarray:
+    """(V, 4) ``k1, k2, dcx_px, dcy_px`` of every view (zeros without a lens model)."""
+    nf = _focal_count(p)
+    return cams[:, nf + 6 : nf + 10] if p.lens else np.zeros((len(cams), len(LENS_PARAMS)))
 
 
 def _log_focal(p: _Problem, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -80,12 +103,24 @@ def _unpack(p: _Problem, cams: np.ndarray, R0: np.ndarray):
     return fx, fy, R, t
 
 
+def _project(p: _Problem, fx, fy, lens, P):
+    """Pixels relative to the given principal points (O, 2) of camera-frame points ``P`` (O, 3), with the normalised
+    coordinates ``n`` (O, 2), their squared radius ``r2`` (O,) and the radial factor ``1 + k1 r2 + k2 r2^2`` (O,)."""
+    v = p.o_view
+    z = np.where(P[:, 2] > 1e-6, P[:, 2], 1.0)
+    n = P[:, :2] / z[:, None]
+    r2 = (n**2).sum(1)
+    radial = 1.0 + lens[v, 0] * r2 + lens[v, 1] * r2**2
+    proj = np.stack([fx[v] * n[:, 0] * radial, fy[v] * n[:, 1] * radial], -1) + lens[v, 2:]
+    return proj, n, r2, radial
+
+
 def _residuals(p: _Problem, cams, R0, X, log_q):
-    """Reprojection (O, 2), shape (S, 23, 3), focal prior (V,), scale prior (G,) residuals, all whitened."""
+    """Reprojection (O, 2), shape (S, 23, 3), focal prior (V,) (with the lens priors (V, 4) after it when the lens
+    is modelled), scale prior (G,) residuals, all whitened."""
     fx, fy, R, t = _unpack(p, cams, R0)
     P = np.einsum("oij,oj->oi", R[p.o_view], X[p.o_group, p.o_joint]) + t[p.o_view]
-    z = np.where(P[:, 2] > 1e-6, P[:, 2], 1.0)
-    proj = np.stack([fx[p.o_view] * P[:, 0] / z, fy[p.o_view] * P[:, 1] / z], -1)
+    proj = _project(p, fx, fy, _lens(p, cams), P)[0]
     r_obs = (proj - p.o_px) * p.o_w[:, None]
     r_obs[P[:, 2] <= 1e-6] = 1e3  # behind the camera
     rel = X[p.s_group] - 0.5 * (X[p.s_group, _LHIP] + X[p.s_group, _RHIP])[:, None]
@@ -93,6 +128,8 @@ def _residuals(p: _Problem, cams, R0, X, log_q):
     r_shape = (q * (rel @ R[p.s_view].transpose(0, 2, 1)) - p.s_joints) * p.shape_w[..., None]
     nf = 1 if p.square else 2
     r_prior = (_log_focal(p, cams[:, :nf])[0].mean(1) - p.prior_log_f) * p.prior_w
+    if p.lens:
+        r_prior = np.concatenate([r_prior, (_lens(p, cams) * p.lens_prior_w).ravel()])
     r_scale = log_q * p.scale_w
     return r_obs, r_shape, r_prior, r_scale, (fx, fy, R, t, P)
 
@@ -131,20 +168,27 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     v, O = p.o_view, len(p.o_view)
     behind = P[:, 2] <= 1e-6  # their residual is a constant penalty: no gradient
     z = np.where(behind, 1.0, P[:, 2])
-    dP = np.zeros((O, 2, 3))
-    dP[:, 0, 0] = fx[v] / z
-    dP[:, 0, 2] = -fx[v] * P[:, 0] / z**2
-    dP[:, 1, 1] = fy[v] / z
-    dP[:, 1, 2] = -fy[v] * P[:, 1] / z**2
+    lens = _lens(p, cams)
+    _, n, r2, radial = _project(p, fx, fy, lens, P)
+    # d pixel / d normalised coordinates: diag(f) (radial I + 2 radial' n n^T), radial' = k1 + 2 k2 r2
+    slope = lens[v, 0] + 2.0 * lens[v, 1] * r2
+    f2 = np.stack([fx[v], fy[v]], -1)  # (O, 2)
+    dn = f2[:, :, None] * (radial[:, None, None] * np.eye(2) + 2.0 * slope[:, None, None] * n[:, :, None] * n[:, None, :])
+    dnP = np.zeros((O, 2, 3))  # d n / d P
+    dnP[:, 0, 0] = dnP[:, 1, 1] = 1.0 / z
+    dnP[:, :, 2] = -n / z[:, None]
     scale = (np.where(behind, 0.0, p.o_w) * np.sqrt(w_obs))[:, None, None]
-    dP *= scale
+    dP = (dn @ dnP) * scale
     Jc = np.zeros((O, 2, nc))
+    distorted = f2 * n * radial[:, None] * scale[:, :, 0]  # d pixel / d log f
     if p.square:
-        Jc[:, 0, 0] = fx[v] * P[:, 0] / z * scale[:, 0, 0]
-        Jc[:, 1, 0] = fy[v] * P[:, 1] / z * scale[:, 0, 0]
+        Jc[:, :, 0] = distorted
     else:
-        Jc[:, 0, 0] = fx[v] * P[:, 0] / z * scale[:, 0, 0]
-        Jc[:, 1, 1] = fy[v] * P[:, 1] / z * scale[:, 0, 0]
+        Jc[:, 0, 0], Jc[:, 1, 1] = distorted[:, 0], distorted[:, 1]
+    if p.lens:
+        Jc[:, :, nf + 6] = f2 * n * r2[:, None] * scale[:, :, 0]  # k1
+        Jc[:, :, nf + 7] = f2 * n * (r2**2)[:, None] * scale[:, :, 0]  # k2
+        Jc[:, 0, nf + 8] = Jc[:, 1, nf + 9] = scale[:, 0, 0]  # principal point offsets
     _, dlogf = _log_focal(p, cams[:, :nf])  # (V, nf)
     Jc[:, :, :nf] *= dlogf[v][:, None, :]
     RX = P - t[v]
@@ -232,6 +276,10 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
             jf = p.prior_w[vv] / nf * dlogf[vv]
             Hcc[vv, :nf, :nf] += np.outer(jf, jf)
             gc[vv, :nf] += jf * r_prior[vv]
+    if p.lens:  # zero-mean priors on the lens parameters: a diagonal term
+        lens_rows = np.arange(nf + 6, nf + 10)
+        Hcc[:, lens_rows, lens_rows] += p.lens_prior_w**2
+        gc[:, lens_rows] += r_prior[p.V:].reshape(p.V, -1) * p.lens_prior_w
     # fixed camera parameters
     Hcc[~free_cam] = 0.0
     Hcc = Hcc.copy()

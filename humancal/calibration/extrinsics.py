@@ -39,6 +39,7 @@ from humancal.calibration.floor import NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.known_cameras import anchor_to_known, known_rig_estimate, with_known_intrinsics
 from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs, spread_groups
+from humancal.calibration.lens import choose_lens, lens_fit, undistorted_detections
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
@@ -186,7 +187,7 @@ def _regroup(ba, groups, detections, lifted_as_given, pp, intrinsics, config, rn
     detections than the first ones (``regroup_min_gain``). Returns (groups, their starting points (G, 23, 3) or
     None when the first are kept, status, (detections in the first groups, in the new ones))."""
     before = sum(len(g) for g in groups)
-    cameras = _cameras(ba, ba.R_cam_from_world, ba.t_cam_from_world_m, pp, intrinsics)
+    cameras = _cameras(ba, ba.R_cam_from_world, ba.t_cam_from_world_m, pp, np.zeros((len(pp), 5)), intrinsics)
     try:
         found = regroup_with_cameras(detections, lifted_as_given, cameras, config.regroup_max_frames)
     except (ValueError, np.linalg.LinAlgError, FloatingPointError) as error:  # refused inputs, numerical failure
@@ -426,6 +427,7 @@ def estimate_extrinsics(
                     "bundle adjustment")
     timings["bundle"] = time.perf_counter() - clock - timings.get("regroup", 0.0)  # the adjustments alone
 
+
     clock = time.perf_counter()
     adjust_any = calibration_adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config)
     with _stage("view agreement"):
@@ -436,6 +438,13 @@ def estimate_extrinsics(
     _require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
                     "view repair")
     timings["views"] = time.perf_counter() - clock
+
+    clock = time.perf_counter()
+    with _stage("lens"):
+        ba, lens, distortion, k1_std, pp, detections, repair = _lens_step(ba, groups, detections, lifted_as_given, pp, bounds,
+                                                                  f0, prior_rel, config, sorted(known), inputs, repair)
+    timings["lens"] = time.perf_counter() - clock
+    adjust_any = calibration_adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config)  # lens's images
     scale, _ = people_scale_factor(ba.points_world_m) if config.scale_from_limbs else (1.0, 0)
     ba = dataclasses.replace(ba, t_cam_from_world_m=scale * ba.t_cam_from_world_m,
                              points_world_m=scale * ba.points_world_m)
@@ -447,7 +456,7 @@ def estimate_extrinsics(
     R_final, t_final, floor, floor_problem, people = _world_frame(ba, V, config, align_floor=not known)
     timings["floor"] = time.perf_counter() - clock
 
-    cameras = _cameras(ba, R_final, t_final, pp, intrinsics)
+    cameras = _cameras(ba, R_final, t_final, pp, distortion, intrinsics)
     edges = np.zeros(V, int)
     for p in pairs:
         if p.support >= config.min_pair_support:
@@ -465,6 +474,11 @@ def estimate_extrinsics(
                                  np.where(resected, "resection+bundle",
                                           np.where(blind, "other_views+bundle", "linear+bundle"))),
         "bundle_status": ba.view_status,
+        "k1": distortion[:, 0],
+        "k1_std": k1_std,
+        "k2": distortion[:, 1],
+        "cx_px": pp[:, 0],
+        "cy_px": pp[:, 1],
         "reprojection_rms_px": ba.reprojection_rms_px,
         "rotation_edges": edges,
         "agreement": repair.final["verdict"].to_numpy(),
@@ -494,17 +508,52 @@ def estimate_extrinsics(
                                         floor_problem=floor_problem, people_world_m=people,
                                         body_size_ratio=body_size_ratio(ba.points_world_m, lifted, groups),
                                         mismatched_detections=dropped, regroup=regroup_status,
-                                        regroup_detections=regroup_counts, scale_factor=scale)
+                                        regroup_detections=regroup_counts, scale_factor=scale, lens=lens)
     logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})
     return ExtrinsicsEstimate(cameras, diagnostics)
 
 
-def _cameras(ba, R_cam_from_world, t_cam_from_world_m, pp, intrinsics) -> list[Camera]:
-    """The bundle adjustment's focal lengths with the given extrinsics, as cameras of the views' image sizes."""
+def _lens_step(ba, groups, detections, lifted_as_given, pp, bounds, f0, prior_rel, config, known_views, inputs,
+               repair):
+    """Step 4b: the lens of every view (:mod:`.lens`) on the checked rig's groups, and the views' agreement scored
+    again in the chosen lens's pinhole images. A lens that puts a view that agreed out of agreement is not taken.
+
+    Returns:
+        ``(ba, lens, distortion (V, 5), k1's std (V,; NaN: pinhole), principal points (V, 2), detections,
+        repair)``: the detections moved to
+        the pinhole images of the lens, the repair's final agreement the one of the returned rig.
+    """
+    V = len(ba.fx_px)
+    lifted = (lifted_as_given.in_camera_frame(_K(ba.fx_px, ba.fx_px, pp)[detections.view])
+              if lifted_as_given.frame == "crop" else lifted_as_given)
+    fit = lens_fit(detections, lifted, pp, bounds, f0, prior_rel, config, hold_lens_views=known_views)
+    with_lens, lens = choose_lens(fit, ba, groups, detections.frame[[g[0] for g in groups]],
+                                  models=config.lens_models, principal_point=config.principal_point,
+                                  min_gain=config.lens_min_gain)
+    if lens.pinhole_at_centre:
+        return ba, lens, np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
+    pp_lens = with_lens.principal_point_px.copy()
+    seen = undistorted_detections(detections, _K(with_lens.fx_px, with_lens.fy_px, pp_lens), with_lens.distortion)
+    _, _, scored = check_and_repair_views(with_lens, groups, dataclasses.replace(
+        inputs, detections=seen, principal_points_px=pp_lens), repair=False)
+    lost = (scored.final["verdict"] == "disagrees") & (repair.final["verdict"] != "disagrees")
+    if lost.any():
+        views = np.flatnonzero(lost.to_numpy()).tolist()
+        reason = f"{lens.reason}; not taken: views {views} no longer agree with the others with it"
+        logger.warning("lens: %s", reason)
+        return ba, dataclasses.replace(lens, model="pinhole", principal_point="centre", reason=reason), \
+            np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
+    return (with_lens, lens, with_lens.distortion, with_lens.lens_std[:, 0], pp_lens, seen,
+            dataclasses.replace(repair, final=scored.final))
+
+
+def _cameras(ba, R_cam_from_world, t_cam_from_world_m, pp, distortion, intrinsics) -> list[Camera]:
+    """The bundle adjustment's focal lengths with the given extrinsics, principal points (V, 2) and lens distortion
+    (V, 5), as cameras of the views' image sizes."""
     return [Camera(_K([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], R_cam_from_world[v], t_cam_from_world_m[v],
-                   e.width_px, e.height_px) for v, e in enumerate(intrinsics)]
+                   e.width_px, e.height_px, distortion[v]) for v, e in enumerate(intrinsics)]
 
 
 def _K(fx, fy, pp) -> np.ndarray:

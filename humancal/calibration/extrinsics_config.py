@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from humancal.calibration.floor import FloorAlignment
+from humancal.calibration.lens import LensChoice
 from humancal.calibration.view_agreement import AgreementConfig
 from humancal.camera import Camera
 
@@ -79,6 +80,12 @@ class ExtrinsicsConfig:
             (2 % of the person's image extent) from the people the other views triangulate.
         min_explained_fraction: a view disagrees when fewer of its detections than this fraction lie near a person
             the other views triangulate.
+        lens_models: radial lens models compared on held-out frames after the bundle adjustment, simplest first
+            (:mod:`~humancal.calibration.lens`): ``("pinhole",)`` turns radial distortion off, a single richer model
+            is taken without comparison.
+        principal_point: ``"auto"`` (estimated when held-out frames support it), ``"centre"`` (the image centre,
+            or the known principal point) or ``"estimate"``.
+        lens_min_gain: relative decrease of the held-out reprojection score a richer lens needs to be taken.
     """
 
     rotation_threshold_deg: float = 10.0
@@ -111,6 +118,9 @@ class ExtrinsicsConfig:
     scale_from_limbs: bool = True
     max_loo_sigma: float = 3.0
     min_explained_fraction: float = 0.75
+    lens_models: tuple[str, ...] = ("k1",)
+    principal_point: str = "centre"
+    lens_min_gain: float = 0.02
 
     def agreement(self) -> AgreementConfig:
         """The thresholds of the views' agreement."""
@@ -135,6 +145,14 @@ class ExtrinsicsConfig:
                 or self.regroup_max_frames < 0:
             raise ValueError(f"ExtrinsicsConfig.regroup_max_frames={self.regroup_max_frames!r} must be an integer >= 0 "
                              "(0: off)")
+        if not self.lens_models or any(m not in ("pinhole", "k1", "k1k2") for m in self.lens_models):
+            raise ValueError(f"ExtrinsicsConfig.lens_models={self.lens_models!r} must name one or more of 'pinhole', "
+                             "'k1', 'k1k2' (simplest first)")
+        if self.principal_point not in ("auto", "centre", "estimate"):
+            raise ValueError(f"ExtrinsicsConfig.principal_point={self.principal_point!r} must be 'auto', 'centre' or "
+                             "'estimate'")
+        if not (np.isfinite(self.lens_min_gain) and 0.0 <= self.lens_min_gain < 1.0):
+            raise ValueError(f"ExtrinsicsConfig.lens_min_gain={self.lens_min_gain} must be in [0, 1)")
         if not (np.isfinite(self.regroup_min_gain) and self.regroup_min_gain >= 1.0):
             raise ValueError(f"ExtrinsicsConfig.regroup_min_gain={self.regroup_min_gain} must be a number >= 1")
 
@@ -183,6 +201,8 @@ class ExtrinsicsDiagnostics:
             most ``max_groups``; (0, 0) when off).
         scale_factor: the factor the world was scaled by after the bundle adjustment so that the people have a
             reference adult's limbs (1: ``scale_from_limbs`` off, or too few people with all limbs).
+        lens: the lens chosen on held-out frames (:class:`~humancal.calibration.lens.LensChoice`; None for known
+            cameras used as given). ``per_view`` then has each view's ``k1``, ``k1_std`` (NaN: kept a pinhole), ``k2``, ``cx_px`` and ``cy_px``.
         timings_s: seconds per step.
     """
 
@@ -200,6 +220,7 @@ class ExtrinsicsDiagnostics:
     regroup: str = "off"
     regroup_detections: tuple[int, int] = (0, 0)
     scale_factor: float = 1.0
+    lens: LensChoice | None = None
 
 
 @dataclass(frozen=True)

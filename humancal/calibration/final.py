@@ -20,7 +20,8 @@ from humancal.calibration.view_agreement import (
     isolate_disagreeing_views,
     person_clusters,
 )
-from humancal.camera import CameraRig
+from humancal.calibration.lens import undistorted_detections
+from humancal.camera import Camera, CameraRig, pinhole
 from humancal.detections import DenseDetections
 
 __all__ = ["FinalCameras", "choose_final_cameras", "FINAL_SOURCES"]
@@ -66,15 +67,24 @@ def choose_final_cameras(initial: CameraRig, refined: CameraRig | None, detectio
         person_id: (D,) the association's person of each detection (-1: none).
         config: thresholds of the agreement.
     """
-    first = agreement_with_people(initial.to_cameras(), detections, person_id, config)
+    first = agreement_with_people(*_pinhole_image(initial, detections), person_id, config)
     if refined is None:
         return FinalCameras(initial, "extrinsics", "no refinement ran", first)
-    again = agreement_with_people(refined.to_cameras(), detections, person_id, config)
+    cameras, seen = _pinhole_image(refined, detections)
+    again = agreement_with_people(cameras, seen, person_id, config)
     if ((again["verdict"] == "disagrees") & (first["verdict"] != "disagrees")).any():
-        clusters = person_clusters(detections, person_id)
-        culprits, _ = isolate_disagreeing_views(refined.to_cameras(), detections, clusters,
-                                                config or AgreementConfig(), clusters, again)
+        clusters = person_clusters(seen, person_id)
+        culprits, _ = isolate_disagreeing_views(cameras, seen, clusters, config or AgreementConfig(), clusters,
+                                                again)
         return FinalCameras(initial, "extrinsics", f"the refinement moved views {sorted(culprits)} out of agreement "
                                                    "with the people the other views place", first)
     return FinalCameras(refined, "refined_cameras", "every view of the refined cameras agrees with the people the "
                                                     "other views place", again)
+
+
+def _pinhole_image(rig: CameraRig, detections: DenseDetections) -> tuple[list[Camera], DenseDetections]:
+    """The rig's cameras as pinholes and the detections moved to their pinhole images (the agreement's geometry
+    is a pinhole's); the rig and detections as given when no lens distorts."""
+    if not np.any(rig.distortion):
+        return rig.to_cameras(), detections
+    return [pinhole(c) for c in rig.to_cameras()], undistorted_detections(detections, rig.K, rig.distortion)

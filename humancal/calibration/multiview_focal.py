@@ -10,7 +10,9 @@ Residuals (all in units of their standard deviation):
 * agreement of each group's keypoints, relative to their hip midpoint and turned into each view's camera
   frame, with that view's lifted pose (std ``shape_std_m``): this gives the metric scale (from body size)
   and holds joints seen in one view only;
-* optional priors on the log focal lengths (from the single-view estimates, weighted by their uncertainty).
+* optional priors on the log focal lengths (from the single-view estimates, weighted by their uncertainty);
+* with a lens model (``lens="k1"`` or ``"k1k2"``, ``principal_point=True``): zero-mean priors on each view's radial
+  coefficients and on its principal point's offset from the one given (``lens_prior_std``).
 
 Reprojection and shape residuals are robustified with Huber weights (iteratively reweighted). The solver is
 Levenberg-Marquardt on the normal equations with the Schur complement over the per-group point blocks (the
@@ -44,6 +46,9 @@ from scipy import ndimage
 
 from humancal.calibration.bundle_terms import (
     _Problem,
+    _camera_params,
+    _focal_count,
+    _lens,
     _log_focal,
     _focal_parameters,
     _unpack,
@@ -92,6 +97,9 @@ class BundleResult:
             keypoint within the Huber threshold) or ``"held"`` (in ``hold_views``).
         rejected_steps: steps refused (cost increase, non-finite values or a singular system).
         cost: the final robust cost (comparable between runs on the same groups and priors).
+        distortion: (V, 5) OpenCV ``(k1, k2, p1, p2, k3)`` of every view (zeros without a lens model).
+        principal_point_px: (V, 2) principal points (the ones given unless ``principal_point`` let them move).
+        lens_std: (V, 4) std of ``k1, k2, dcx_px, dcy_px`` as the focal's (:func:`_camera_std`); NaN where held.
         detection_error_sigma: (S,) per detection of the groups (the rows of ``np.concatenate(groups)``, in that
             order) the median reprojection error of its keypoints in units of their std (1 % of the person's
             image extent, at least 1 px; see the module docstring), NaN where none of its keypoints was used:
@@ -113,6 +121,9 @@ class BundleResult:
     rejected_steps: int = 0
     cost: float = float("nan")
     detection_error_sigma: np.ndarray | None = None
+    distortion: np.ndarray | None = None
+    principal_point_px: np.ndarray | None = None
+    lens_std: np.ndarray | None = None
 
 
 def focal_bounds_from_fov(width_px: np.ndarray, fov_range_deg: tuple[float, float] = (10.0, 140.0)) -> np.ndarray:
@@ -158,6 +169,12 @@ def bundle_adjust(
     tolerance: float = 1e-6,
     camera_tolerance: float = 2e-5,
     hold_views: Sequence[int] = (),
+    lens: str = "pinhole",
+    principal_point: bool = False,
+    lens_start: np.ndarray | None = None,
+    lens_prior_std: tuple[float, float, float] = (0.25, 0.1, 50.0),
+    hold_lens_views: Sequence[int] = (),
+    adjust_cameras: bool = True,
 ) -> BundleResult:
     """Refine focal lengths, rotations, translations and the groups' keypoints (see the module docstring).
 
@@ -190,6 +207,15 @@ def bundle_adjust(
             along a flat valley the cameras still move, and it does not fire). 0 turns it off.
         hold_views: views whose focal length and pose stay as given (e.g. views left out of the groups while the
             others are adjusted); the first view not held keeps its pose (the world frame) instead of view 0.
+        lens: ``"pinhole"`` (no radial distortion), ``"k1"`` or ``"k1k2"``: the radial coefficients each view
+            estimates (OpenCV's, on normalised image coordinates).
+        principal_point: whether each view's principal point moves from ``principal_point_px`` too.
+        lens_start: (V, 4) starting ``k1, k2, dcx_px, dcy_px`` (the principal point's offset from
+            ``principal_point_px``); None: zeros. Held parameters keep these values.
+        lens_prior_std: std of the zero-mean priors on k1, on k2 and on the principal point's offset (pixels).
+        hold_lens_views: views whose lens parameters stay at ``lens_start`` (e.g. known cameras).
+        adjust_cameras: False holds every camera and solves the groups' keypoints (and scales) alone (e.g. to score
+            held-out groups with cameras fitted on others).
 
     Returns:
         :class:`BundleResult` (the last state that lowered the cost).
@@ -199,6 +225,8 @@ def bundle_adjust(
             or a group has no finite starting keypoint.
     """
     V, G = len(fx_px), len(groups)
+    if lens not in ("pinhole", "k1", "k1k2"):
+        raise ValueError(f"bundle_adjust: lens must be 'pinhole', 'k1' or 'k1k2', got {lens!r}")
     pp = np.asarray(principal_point_px, dtype=np.float64)
     fx0, fy0 = np.asarray(fx_px, dtype=np.float64), np.asarray(fy_px, dtype=np.float64)
     R_init = np.asarray(R_cam_from_world, dtype=np.float64)
@@ -245,9 +273,12 @@ def bundle_adjust(
         log_f_mid=log_bounds.mean(1), log_f_half=0.5 * (log_bounds[:, 1] - log_bounds[:, 0]),
         prior_log_f=np.nan_to_num(prior_f), prior_w=prior_w, huber=huber,
         scale_w=1.0 / group_scale_std if group_scale_std else 0.0, free_scale=bool(group_scale_std),
+        lens=lens != "pinhole" or principal_point or lens_start is not None,
+        lens_prior_w=1.0 / np.asarray([lens_prior_std[0], lens_prior_std[1], lens_prior_std[2], lens_prior_std[2]],
+                                      dtype=np.float64),
     )
-    nf = 1 if square_pixels else 2
-    nc = nf + 6
+    nf = _focal_count(prob)
+    nc = _camera_params(prob)
     log_f0 = np.log(np.c_[fx0] if square_pixels else np.c_[fx0, fy0])
     if square_pixels and not np.allclose(fx0, fy0):
         log_f0 = 0.5 * (np.log(np.c_[fx0]) + np.log(np.c_[fy0]))
@@ -258,22 +289,33 @@ def bundle_adjust(
                        np.round(bounds[outside]).tolist())
     cams = np.zeros((V, nc))
     cams[:, :nf] = _focal_parameters(prob, log_f0)
-    cams[:, nf + 3 :] = t_init
+    cams[:, nf + 3 : nf + 6] = t_init
+    if prob.lens:
+        cams[:, nf + 6 :] = 0.0 if lens_start is None else np.asarray(lens_start, dtype=np.float64)
     R0 = R_init.copy()
     log_q = np.zeros(G)
     free = np.ones((V, nc), bool)
     held = np.zeros(V, bool)
     held[list(hold_views)] = True
-    if held.all():
+    if not adjust_cameras:
+        free[:] = False
+    elif held.all():
         raise ValueError("bundle_adjust: every view is held; nothing to adjust")
-    free[held] = False
-    free[int(np.flatnonzero(~held)[0]), nf:] = False  # the world frame
+    else:
+        free[held] = False
+        free[int(np.flatnonzero(~held)[0]), nf : nf + 6] = False  # the world frame
+    if prob.lens:  # which lens parameters move: the model's, in views that are not held
+        moving = np.array([lens != "pinhole", lens == "k1k2", principal_point, principal_point])
+        free[:, nf + 6 :] &= moving[None]
+        free[list(hold_lens_views), nf + 6 :] = False
 
     lam, converged, it, rejected, still = 1e-3, False, 0, 0, 0
     scale_m = max(float(np.median(np.linalg.norm(t_init, axis=1))), 1e-3)
     Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
     if not np.isfinite(cost):
         raise CalibrationError("bundle adjustment: the starting cost is not finite (non-finite keypoints or poses)")
+    if not free.any():
+        camera_tolerance = 0.0  # the cameras never move: only the cost ends the iterations
     for it in range(1, max_iterations + 1):
         improved = False
         for _ in range(10):
@@ -300,7 +342,11 @@ def bundle_adjust(
         if (old - cost) / max(old, 1e-12) < tolerance or still >= _STILL_ITERATIONS:
             converged = True
             break
-    f_std = _focal_std(prob, cams, R0, X, log_q, free, w_obs)
+    nf = _focal_count(prob)
+    dlogf = _log_focal(prob, cams[:, :nf])[1][:, 0]
+    params_std = _camera_std(prob, cams, R0, X, log_q, free, w_obs)
+    f_std = params_std[:, 0] * dlogf  # std of log f = std of u times d log f / d u
+    lens_std = np.where(free[:, nf + 6 :], params_std[:, nf + 6 :], np.nan) if prob.lens else np.full((V, 4), np.nan)
     fx, fy, R, t = _unpack(prob, cams, R0)
     status = _view_status(prob, np.log(fx), log_bounds, None, None)
     # a focal at a bound of its range is not determined by the data (the bounded parameterization's derivative
@@ -318,8 +364,12 @@ def bundle_adjust(
     if (status != "ok").any():
         logger.warning("bundle adjustment: views %s end %s", np.flatnonzero(status != "ok").tolist(),
                        status[status != "ok"].tolist())
+    lens_values = _lens(prob, cams)
+    distortion = np.zeros((V, 5))
+    distortion[:, :2] = lens_values[:, :2]
     return BundleResult(fx, fy, R, t, X, f_std, rms, float(inl.mean()) if len(inl) else 0.0, it, converged,
-                        np.exp(log_q), status, rejected, float(cost), detection_error)
+                        np.exp(log_q), status, rejected, float(cost), detection_error, distortion,
+                        pp + lens_values[:, 2:], lens_std)
 
 
 def _camera_step(prob: _Problem, cams: np.ndarray, new_cams: np.ndarray, nf: int, scale_m: float) -> float:
@@ -327,7 +377,7 @@ def _camera_step(prob: _Problem, cams: np.ndarray, new_cams: np.ndarray, nf: int
     relative to ``scale_m``."""
     log_f_change = np.abs(_log_focal(prob, new_cams[:, :nf])[0] - _log_focal(prob, cams[:, :nf])[0]).max()
     rotation_change = np.abs(new_cams[:, nf : nf + 3]).max()
-    translation_change = np.abs(new_cams[:, nf + 3 :] - cams[:, nf + 3 :]).max() / scale_m
+    translation_change = np.abs(new_cams[:, nf + 3 : nf + 6] - cams[:, nf + 3 : nf + 6]).max() / scale_m
     return float(max(log_f_change, rotation_change, translation_change))
 
 
@@ -339,8 +389,9 @@ def _median_per_detection(values: np.ndarray, detection: np.ndarray, count: int)
     return np.where(np.bincount(detection, minlength=count) > 0, medians, np.nan)  # scipy gives garbage for none
 
 
-def _focal_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
-    """(V,) relative std of the focal lengths that the data support (inverse Schur complement).
+def _camera_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
+    """(V, nc) std of every camera parameter that the data support (inverse Schur complement; inf where the final
+    system is singular).
 
     Two corrections to the textbook covariance keep it honest: a lifted pose's errors are one wrong pose, strongly
     correlated over its 23 joints, so the shape term's information is counted as one joint's per lifted pose
@@ -352,7 +403,6 @@ def _focal_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
     per frame.
     """
     V, nc = prob.V, cams.shape[1]
-    nf = nc - 6
     share = 1.0 / np.sqrt(_repeats(X))  # (G,) whitened residuals scaled: information / repeats
     honest = replace(prob, shape_w=prob.shape_w / np.sqrt(prob.shape_w.shape[1]) * share[prob.s_group, None],
                      o_w=prob.o_w * share[prob.o_group])
@@ -360,18 +410,16 @@ def _focal_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
         Hcc, Hcp, Hpp, gc, gp, _, _ = _normal_equations(honest, cams, R0, X, log_q, free)
         _, _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
         if not np.isfinite(S).all():
-            return np.full(V, np.inf)
+            return np.full((V, nc), np.inf)
         cov = np.linalg.pinv(S)
     except np.linalg.LinAlgError:
         logger.warning("bundle adjustment: singular final system, focal uncertainties unknown")
-        return np.full(V, np.inf)
+        return np.full((V, nc), np.inf)
     r_obs = _residuals(prob, cams, R0, X, log_q)[0]
     inlier = w_obs >= 1.0
     variance_factor = float(np.mean(r_obs[inlier] ** 2)) if inlier.any() else 1.0
-    # std of log f = std of u times d log f / d u
-    dlogf = _log_focal(prob, cams[:, :nf])[1][:, 0]
-    diag = np.array([cov[v * nc, v * nc] for v in range(V)])
-    return np.sqrt(np.maximum(diag, 0.0) * max(variance_factor, 1.0)) * dlogf
+    diag = np.diagonal(cov).reshape(V, nc)
+    return np.sqrt(np.maximum(diag, 0.0) * max(variance_factor, 1.0))
 
 
 def _repeats(X: np.ndarray, distance_m: float = _REPEAT_DISTANCE_M) -> np.ndarray:

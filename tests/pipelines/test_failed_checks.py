@@ -62,7 +62,7 @@ def _calibration(partition: str):
                                   floor_problem="only 2 standing people" if no_floor else None,
                                   people_world_m=PEOPLE + [0.0, 0.0, 1.0],
                                   body_size_ratio=1.0, mismatched_detections=0, regroup="regrouped",
-                                  regroup_detections=(40, 60), scale_factor=1.0)
+                                  regroup_detections=(40, 60), scale_factor=1.0, lens=None)
     return SimpleNamespace(cameras=cameras, diagnostics=diagnostics)
 
 

@@ -60,7 +60,8 @@ def test_diagnostics(ring_result):
     assert (pv["focal_single_view_px"].to_numpy() == [e.fx_px for e in intr]).all()
     groups = result.diagnostics.groups
     assert groups.groupby("group")["view"].apply(lambda v: v.is_unique).all()
-    assert set(result.diagnostics.timings_s) == {"rotations", "linear", "bundle", "regroup", "views", "floor"}
+    assert set(result.diagnostics.timings_s) == {"rotations", "linear", "bundle", "regroup", "lens", "views",
+                                                  "floor"}
     assert (pv["agreement"] == "ok").all() and not pv["reregistered"].any()
 
 

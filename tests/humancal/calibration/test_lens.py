@@ -1,0 +1,58 @@
+"""The lens step of the calibration: a distorting lens's k1 recovered from the people, pinholes kept as pinholes,
+and the held-out comparison's folds."""
+
+import numpy as np
+import pytest
+
+from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
+from humancal.calibration.lens import frame_folds
+from humancal.detections import detections_to_dense
+from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
+from humancal.synthetic import generate_scene, preset
+
+
+def _calibrate(scene, config=None):
+    d = detections_to_dense(scene.detections)
+    lifted = lift_detections(load_lifter(shipped_checkpoint()), d.keypoints_px, d.scores)
+    intr = estimate_intrinsics(d, lifted, [(c.width_px, c.height_px) for c in scene.rig],
+                               IntrinsicsConfig(missing_upright="defer"))
+    return estimate_extrinsics(d, lifted, intr, config)
+
+
+@pytest.fixture(scope="module")
+def barrel_scene(body_model):
+    """4 people, 5 views, 60 frames, every lens k1 in [-0.12, -0.08]."""
+    return generate_scene(preset("demo", num_frames=60, distortion_k1_range=(-0.12, -0.08), seed=5), body_model,
+                          sequence="barrel")
+
+
+def test_a_barrel_lens_is_recovered_and_the_rig_with_it(barrel_scene):
+    from evaluation.camera_metrics import camera_errors
+
+    truth = np.array([c.distortion[0] for c in barrel_scene.rig])
+    pinhole = _calibrate(barrel_scene, ExtrinsicsConfig(lens_models=("pinhole",)))
+    lens = _calibrate(barrel_scene)
+    k1, k1_std = lens.diagnostics.per_view["k1"].to_numpy(), lens.diagnostics.per_view["k1_std"].to_numpy()
+    assert np.median(np.abs(k1 - truth)) < 0.03 and (np.abs(k1 - truth) < 2 * k1_std).all(), (k1, k1_std, truth)
+    np.testing.assert_allclose([c.distortion[0] for c in lens.cameras], k1)  # the cameras carry it out
+    assert lens.diagnostics.lens.model == "k1" and not lens.diagnostics.lens.pinhole_views
+    before, after = camera_errors(pinhole.cameras, list(barrel_scene.rig)), camera_errors(lens.cameras,
+                                                                                           list(barrel_scene.rig))
+    assert np.median(after["focal_error_pct"]) < 0.5 < np.median(before["focal_error_pct"])
+    assert np.median(after["position_error_mm"]) < 0.3 * np.median(before["position_error_mm"])
+    assert (lens.diagnostics.per_view["agreement"] == "ok").all()
+
+
+def test_pinhole_views_stay_pinholes(body_model):
+    scene = generate_scene(preset("demo", num_frames=60), body_model, sequence="pinhole")
+    result = _calibrate(scene)
+    assert (result.diagnostics.per_view["k1"] == 0.0).all()
+    assert all(not np.any(c.distortion) for c in result.cameras)
+    assert "kept as pinholes" in result.diagnostics.lens.reason
+
+
+def test_frame_folds_alternate_blocks_of_consecutive_frames():
+    frames = np.repeat(np.arange(60), 2)
+    folds = frame_folds(frames, blocks=6)
+    assert np.bincount(folds).tolist() == [60, 60]
+    assert (folds[frames < 10] == 0).all() and (folds[(frames >= 10) & (frames < 20)] == 1).all()
