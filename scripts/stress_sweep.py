@@ -52,14 +52,13 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import logging  # noqa: E402
-import multiprocessing  # noqa: E402
 import time  # noqa: E402
 import traceback  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from sweep_scoring import SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, score_calibration  # noqa: E402,F401
+from sweep_scoring import SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, run_jobs, score_calibration  # noqa: E402,F401
 
 BEHAVIOURS = ("mixed", "mixed", "seated", "low")
 """Scene ``i`` has behaviour ``BEHAVIOURS[i % 4]``."""
@@ -331,18 +330,8 @@ def main() -> None:
     indices = [int(i) for i in args.only.split(",")] if args.only else list(range(args.scenes))
     todo = [i for i in indices if not (folder / f"scene_{i:04d}.json").exists()]
     print(f"{len(indices) - len(todo)} scenes already done in {folder}; {len(todo)} to run", flush=True)
-    start = time.perf_counter()
-    if todo:
-        jobs = [(i, args.seed, str(folder), args.views) for i in todo]
-        if args.jobs > 1:
-            with multiprocessing.get_context("spawn").Pool(args.jobs, _init_worker,
-                                                              (specs, not args.no_repair, not args.scale_from_lifted)) as pool:
-                for done, (_, line) in enumerate(pool.imap_unordered(_run_and_store, jobs), 1):
-                    print(f"[{done}/{len(todo)} {time.perf_counter() - start:.0f} s] {line}", flush=True)
-        else:
-            _init_worker(specs, not args.no_repair, not args.scale_from_lifted)
-            for done, job in enumerate(jobs, 1):
-                print(f"[{done}/{len(todo)} {time.perf_counter() - start:.0f} s] {_run_and_store(job)[1]}", flush=True)
+    run_jobs([(i, args.seed, str(folder), args.views) for i in todo], _run_and_store, _init_worker,
+             (specs, not args.no_repair, not args.scale_from_lifted), args.jobs)
     results = [json.loads((folder / f"scene_{i:04d}.json").read_text()) for i in indices]
     scenes = pd.DataFrame([r["scene"] for r in results])
     views = pd.DataFrame([v for r in results for v in r["views"]])

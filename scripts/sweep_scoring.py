@@ -9,6 +9,8 @@ A **silent failure** is a view whose focal error exceeds ``SILENT_FOCAL_PCT`` or
 from __future__ import annotations
 
 import json
+import multiprocessing
+import time
 
 import numpy as np
 import pandas as pd
@@ -137,3 +139,28 @@ def quantiles(values: pd.Series) -> dict:
             "max": float(values.max())}
 
 
+
+
+def run_jobs(jobs: list, run_and_store, init, init_args: tuple, processes: int) -> None:
+    """Run the sweep's pending scenes, one job each, printing a progress line per scene as it finishes.
+
+    Args:
+        jobs: the jobs (``run_and_store``'s argument).
+        run_and_store: runs one job and stores its result; returns the progress line (or ``(index, line)``).
+        init: sets a worker up (lifters, body model), called with ``init_args`` in each worker process.
+        processes: worker processes (spawned); 1 runs the jobs in this process.
+    """
+    start = time.perf_counter()
+
+    def report(done: int, out) -> None:
+        line = out[1] if isinstance(out, tuple) else out
+        print(f"[{done}/{len(jobs)} {time.perf_counter() - start:.0f} s] {line}", flush=True)
+
+    if processes > 1 and jobs:
+        with multiprocessing.get_context("spawn").Pool(processes, init, init_args) as pool:
+            for done, out in enumerate(pool.imap_unordered(run_and_store, jobs), 1):
+                report(done, out)
+    elif jobs:
+        init(*init_args)
+        for done, job in enumerate(jobs, 1):
+            report(done, run_and_store(job))

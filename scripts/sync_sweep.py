@@ -27,20 +27,10 @@ import numpy as np
 import pandas as pd
 
 
-def crop_views(detections: pd.DataFrame, starts: np.ndarray, num_frames: int) -> pd.DataFrame:
-    """Each view's ``num_frames`` frames from its start, numbered from 0."""
-    parts = []
-    for v, start in enumerate(starts):
-        d = detections[(detections["view"] == v) & (detections["frame"] >= start)
-                       & (detections["frame"] < start + num_frames)].copy()
-        d["frame"] = (d["frame"] - start).astype(detections["frame"].dtype)
-        parts.append(d)
-    return pd.concat(parts, ignore_index=True)
-
-
 def run_scene(seed: int, body, lifter) -> dict:
     from humancal.synthetic import generate_scene, preset
     from humancal.sync import estimate_time_offsets
+    from humancal.synthetic.clocks import started_by_hand
 
     rng = np.random.default_rng(seed)
     views = int(rng.integers(5, 11))
@@ -52,7 +42,7 @@ def run_scene(seed: int, body, lifter) -> dict:
     config = preset("demo", num_views=views, num_people=people, num_frames=frames + shift, seed=1000 + seed,
                     behaviour=behaviour)
     scene = generate_scene(config, body, sequence=f"sync_{seed}")
-    detections = crop_views(scene.detections, starts, frames)
+    detections = started_by_hand(scene.detections, starts, frames)
     truth = starts - starts[0]
     start = time.perf_counter()
     estimate = estimate_time_offsets(detections, config.fps, lifter=lifter)

@@ -16,7 +16,8 @@ import pandas as pd
 
 from humancal.synthetic.config import SceneConfig
 
-__all__ = ["ViewClocks", "draw_clocks", "synced_clocks", "keypoints_at", "hidden_at", "to_reference_frames"]
+__all__ = ["ViewClocks", "draw_clocks", "synced_clocks", "keypoints_at", "hidden_at", "started_by_hand",
+           "to_reference_frames"]
 
 _EPS_FRAMES = 1e-9
 """Slack, in reference frames, when a view's frame time falls on a reference frame up to round-off."""
@@ -176,3 +177,22 @@ def to_reference_frames(detections: pd.DataFrame, fps: np.ndarray, time_offset_s
     nearest = np.rint((reference / reference_fps - offset[view]) * fps[view]).astype(np.int64)
     keep = (nearest == n) & (reference >= 0)
     return detections.loc[keep].assign(frame=reference[keep]).reset_index(drop=True)
+
+
+def started_by_hand(detections: pd.DataFrame, starts, num_frames: int) -> pd.DataFrame:
+    """A synced scene's detections as cameras started by hand would have filmed them: view ``v`` keeps the
+    ``num_frames`` frames from its reference frame ``starts[v]`` on, numbered from 0 (so its time offset from view 0
+    is ``(starts[v] - starts[0]) / fps``, whole frames).
+
+    Args:
+        detections: canonical ``detections`` table on the reference clock.
+        starts: (V,) each view's first reference frame.
+        num_frames: frames each view films.
+    """
+    parts = []
+    for v, start in enumerate(starts):
+        d = detections[(detections["view"] == v) & (detections["frame"] >= start)
+                       & (detections["frame"] < start + num_frames)].copy()
+        d["frame"] = (d["frame"] - start).astype(detections["frame"].dtype)
+        parts.append(d)
+    return pd.concat(parts, ignore_index=True)

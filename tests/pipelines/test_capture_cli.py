@@ -504,20 +504,13 @@ def test_coco_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, mo
 def _write_unsynced_capture(root: Path, body_model, starts=(20, 0, 45, 33, 7, 60, 12), num_frames: int = 291):
     """A synthetic 7-view scene whose cameras were started by hand: view v films ``num_frames`` frames from its
     own start, numbered from 0 (offset ``(starts[v] - starts[0]) / 30`` s)."""
-    import pandas as pd
-
     from humancal.formats import write_openpose
     from humancal.synthetic import generate_scene, preset
+    from humancal.synthetic.clocks import started_by_hand
 
     scene = generate_scene(preset("demo", num_views=7, num_people=4, num_frames=351, seed=109), body_model,
                            sequence="capture")
-    parts = []
-    for v, start in enumerate(starts):
-        d = scene.detections
-        d = d[(d["view"] == v) & (d["frame"] >= start) & (d["frame"] < start + num_frames)].copy()
-        d["frame"] = (d["frame"] - start).astype("int32")
-        parts.append(d)
-    folders = write_openpose(pd.concat(parts, ignore_index=True), root / "op")
+    folders = write_openpose(started_by_hand(scene.detections, starts, num_frames), root / "op")
     return [str(f) for f in folders.values()], np.asarray(starts) - starts[0]
 
 

@@ -7,6 +7,7 @@ import pytest
 
 from humancal.sync import SyncConfig, apply_time_offsets, estimate_time_offsets, link_view_tracks
 from humancal.sync.capture import synchronise_views
+from humancal.synthetic.clocks import started_by_hand
 
 
 @pytest.fixture(scope="module")
@@ -14,18 +15,6 @@ def lifter():
     from humancal.lifter import load_lifter, shipped_checkpoint
 
     return load_lifter(shipped_checkpoint())
-
-
-def crop_views(detections: pd.DataFrame, starts, num_frames: int) -> pd.DataFrame:
-    """Each view films ``num_frames`` frames from its own start frame, numbered from 0 (a camera started by hand):
-    view v's offset is ``(starts[v] - starts[0]) / fps``."""
-    parts = []
-    for v, start in enumerate(starts):
-        d = detections[(detections["view"] == v) & (detections["frame"] >= start)
-                       & (detections["frame"] < start + num_frames)].copy()
-        d["frame"] = (d["frame"] - start).astype(detections["frame"].dtype)
-        parts.append(d)
-    return pd.concat(parts, ignore_index=True)
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +27,7 @@ def walking_scene(body_model):
 
 def test_integer_frame_offsets_are_found_exactly(walking_scene, lifter):
     starts = np.array([20, 0, 45, 33, 7, 60, 12])
-    detections = crop_views(walking_scene.detections, starts, 291)
+    detections = started_by_hand(walking_scene.detections, starts, 291)
     offsets = estimate_time_offsets(detections, 30.0, lifter=lifter)
     truth = starts - starts[0]
     assert offsets.status[0] == "ok" and offsets.offset_s[0] == 0.0
@@ -51,11 +40,11 @@ def test_integer_frame_offsets_are_found_exactly(walking_scene, lifter):
 
 def test_applied_offsets_give_back_the_synchronised_detections(walking_scene, lifter):
     starts = np.array([10, 0, 25, 3, 17, 40, 31])
-    shifted = crop_views(walking_scene.detections, starts, 291)
+    shifted = started_by_hand(walking_scene.detections, starts, 291)
     offsets = estimate_time_offsets(shifted, 30.0, lifter=lifter)
     applied = apply_time_offsets(shifted, np.round(offsets.offset_frames) / 30.0, 30.0)
     # on view 0's clock, view v's frame n is the scene's frame n + starts[0]: the rows of the original scene
-    expected = crop_views(walking_scene.detections, np.full(7, starts[0]), 291)
+    expected = started_by_hand(walking_scene.detections, np.full(7, starts[0]), 291)
     expected = expected[expected["frame"] <= shifted.loc[shifted["view"] == 0, "frame"].max()]
     got = applied.detections.merge(expected, on=["sequence", "frame", "view", "det_id", "joint"], how="outer",
                                    indicator=True)
