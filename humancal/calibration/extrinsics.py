@@ -39,7 +39,7 @@ from humancal.calibration.floor import NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.known_cameras import anchor_to_known, known_rig_estimate, with_known_intrinsics
 from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs, spread_groups
-from humancal.calibration.lens import choose_lens, lens_fit, undistorted_detections
+from humancal.calibration.lens import lens_step
 from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
@@ -441,7 +441,7 @@ def estimate_extrinsics(
 
     clock = time.perf_counter()
     with _stage("lens"):
-        ba, lens, distortion, k1_std, pp, detections, repair = _lens_step(ba, groups, detections, lifted_as_given, pp, bounds,
+        ba, lens, distortion, k1_std, pp, detections, repair = lens_step(ba, groups, detections, lifted_as_given, pp, bounds,
                                                                   f0, prior_rel, config, sorted(known), inputs, repair)
     timings["lens"] = time.perf_counter() - clock
     adjust_any = calibration_adjuster(detections, lifted_as_given, pp, bounds, f0, prior_rel, config)  # lens's images
@@ -513,40 +513,6 @@ def estimate_extrinsics(
                 len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
                 {k: round(v, 2) for k, v in timings.items()})
     return ExtrinsicsEstimate(cameras, diagnostics)
-
-
-def _lens_step(ba, groups, detections, lifted_as_given, pp, bounds, f0, prior_rel, config, known_views, inputs,
-               repair):
-    """Step 4b: the lens of every view (:mod:`.lens`) on the checked rig's groups, and the views' agreement scored
-    again in the chosen lens's pinhole images. A lens that puts a view that agreed out of agreement is not taken.
-
-    Returns:
-        ``(ba, lens, distortion (V, 5), k1's std (V,; NaN: pinhole), principal points (V, 2), detections,
-        repair)``: the detections moved to
-        the pinhole images of the lens, the repair's final agreement the one of the returned rig.
-    """
-    V = len(ba.fx_px)
-    lifted = (lifted_as_given.in_camera_frame(_K(ba.fx_px, ba.fx_px, pp)[detections.view])
-              if lifted_as_given.frame == "crop" else lifted_as_given)
-    fit = lens_fit(detections, lifted, pp, bounds, f0, prior_rel, config, hold_lens_views=known_views)
-    with_lens, lens = choose_lens(fit, ba, groups, detections.frame[[g[0] for g in groups]],
-                                  models=config.lens_models, principal_point=config.principal_point,
-                                  min_gain=config.lens_min_gain)
-    if lens.pinhole_at_centre:
-        return ba, lens, np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
-    pp_lens = with_lens.principal_point_px.copy()
-    seen = undistorted_detections(detections, _K(with_lens.fx_px, with_lens.fy_px, pp_lens), with_lens.distortion)
-    _, _, scored = check_and_repair_views(with_lens, groups, dataclasses.replace(
-        inputs, detections=seen, principal_points_px=pp_lens), repair=False)
-    lost = (scored.final["verdict"] == "disagrees") & (repair.final["verdict"] != "disagrees")
-    if lost.any():
-        views = np.flatnonzero(lost.to_numpy()).tolist()
-        reason = f"{lens.reason}; not taken: views {views} no longer agree with the others with it"
-        logger.warning("lens: %s", reason)
-        return ba, dataclasses.replace(lens, model="pinhole", principal_point="centre", reason=reason), \
-            np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
-    return (with_lens, lens, with_lens.distortion, with_lens.lens_std[:, 0], pp_lens, seen,
-            dataclasses.replace(repair, final=scored.final))
 
 
 def _cameras(ba, R_cam_from_world, t_cam_from_world_m, pp, distortion, intrinsics) -> list[Camera]:

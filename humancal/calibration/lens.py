@@ -27,11 +27,13 @@ import numpy as np
 import pandas as pd
 
 from humancal.calibration.multiview_focal import BundleResult, bundle_adjust
+from humancal.calibration.view_repair import check_and_repair_views
+from humancal.camera import intrinsic_matrices
 from humancal.detections import DenseDetections
 from humancal.geometry.projection import undistort_points_px
 from humancal.lifter.lifted import LiftedPoses
 
-__all__ = ["LENS_MODELS", "LensChoice", "choose_lens", "frame_folds", "lens_fit", "undistorted_detections"]
+__all__ = ["LENS_MODELS", "LensChoice", "choose_lens", "frame_folds", "lens_fit", "lens_step", "undistorted_detections"]
 
 LENS_MODELS = ("pinhole", "k1", "k1k2")
 """Radial lens models, simplest first."""
@@ -215,3 +217,44 @@ def undistorted_detections(detections: DenseDetections, K: np.ndarray, distortio
             moved = undistort_points_px(keypoints[rows].reshape(-1, 2), K[v], distortion[v])
             keypoints[rows] = moved.reshape(len(rows), -1, 2)
     return replace(detections, keypoints_px=keypoints)
+
+
+def lens_step(ba, groups, detections, lifted_as_given, pp, bounds, f0, prior_rel, config, known_views, inputs,
+               repair):
+    """The calibration's lens step: the lens of every view (:func:`choose_lens`) on the checked rig's groups, and the
+    views' agreement scored again in the chosen lens's pinhole images. A lens that puts a view that agreed out of
+    agreement is not taken.
+
+    Args:
+        ba, groups: the checked rig's bundle adjustment and groups; detections, lifted_as_given: as the calibration
+            has them; pp: (V, 2) principal points; bounds, f0, prior_rel: the focal bounds and priors; config:
+            :class:`~humancal.calibration.ExtrinsicsConfig`; known_views: views whose lens stays a pinhole;
+            inputs, repair: the view check's inputs and result (:mod:`.view_repair`).
+
+    Returns:
+        ``(ba, lens, distortion (V, 5), k1's std (V,; NaN: pinhole), principal points (V, 2), detections,
+        repair)``: the detections moved to
+        the pinhole images of the lens, the repair's final agreement the one of the returned rig.
+    """
+    V = len(ba.fx_px)
+    lifted = (lifted_as_given.in_camera_frame(intrinsic_matrices(ba.fx_px, ba.fx_px, pp[:, 0], pp[:, 1])[detections.view])
+              if lifted_as_given.frame == "crop" else lifted_as_given)
+    fit = lens_fit(detections, lifted, pp, bounds, f0, prior_rel, config, hold_lens_views=known_views)
+    with_lens, lens = choose_lens(fit, ba, groups, detections.frame[[g[0] for g in groups]],
+                                  models=config.lens_models, principal_point=config.principal_point,
+                                  min_gain=config.lens_min_gain)
+    if lens.pinhole_at_centre:
+        return ba, lens, np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
+    pp_lens = with_lens.principal_point_px.copy()
+    seen = undistorted_detections(detections, intrinsic_matrices(with_lens.fx_px, with_lens.fy_px, pp_lens[:, 0], pp_lens[:, 1]), with_lens.distortion)
+    _, _, scored = check_and_repair_views(with_lens, groups, replace(
+        inputs, detections=seen, principal_points_px=pp_lens), repair=False)
+    lost = (scored.final["verdict"] == "disagrees") & (repair.final["verdict"] != "disagrees")
+    if lost.any():
+        views = np.flatnonzero(lost.to_numpy()).tolist()
+        reason = f"{lens.reason}; not taken: views {views} no longer agree with the others with it"
+        logger.warning("lens: %s", reason)
+        return ba, replace(lens, model="pinhole", principal_point="centre", reason=reason), \
+            np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
+    return (with_lens, lens, with_lens.distortion, with_lens.lens_std[:, 0], pp_lens, seen,
+            replace(repair, final=scored.final))
