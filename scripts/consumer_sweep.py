@@ -46,7 +46,6 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
 import importlib.util  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
@@ -56,7 +55,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import stress_sweep  # noqa: E402  (the calibration stress sweep, beside this script)
-from sweep_scoring import SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, run_jobs, score_calibration  # noqa: E402
+from sweep_scoring import (  # noqa: E402
+    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, run_jobs, score_calibration, sweep_arguments)
 
 FAMILIES = ("phone", "action_cam", "webcam")
 """Scene ``i`` is of family ``FAMILIES[i % 3]``."""
@@ -271,14 +271,7 @@ def _markdown(summary: dict, oracle: bool) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", type=int, default=60)
-    parser.add_argument("--seed", type=int, default=0, help="sweep seed")
-    parser.add_argument("--lifters", default="shipped",
-                        help="comma-separated lifter checkpoints ('shipped' for the packaged weights)")
-    parser.add_argument("--out", type=Path, required=True, help="folder for the per-scene results and summaries")
-    parser.add_argument("--jobs", type=int, default=1, help="scenes calibrated in parallel (one process each)")
-    parser.add_argument("--only", default=None, help="comma-separated scene indices")
+    parser = sweep_arguments(__doc__.splitlines()[0], scenes=60)
     parser.add_argument("--lens", default=None, help="radial lens models compared by the calibration, comma-separated "
                         "(default: the calibration's, k1); e.g. pinhole")
     parser.add_argument("--principal-point", default=None, choices=("centre", "estimate", "auto"),

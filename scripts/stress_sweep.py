@@ -49,7 +49,6 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 import logging  # noqa: E402
 import time  # noqa: E402
@@ -58,7 +57,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from sweep_scoring import SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, run_jobs, score_calibration  # noqa: E402,F401
+from sweep_scoring import (  # noqa: E402,F401
+    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, run_jobs, score_calibration, sweep_arguments)
 
 BEHAVIOURS = ("mixed", "mixed", "seated", "low")
 """Scene ``i`` has behaviour ``BEHAVIOURS[i % 4]``."""
@@ -306,14 +306,7 @@ def _plot(views: pd.DataFrame, scenes: pd.DataFrame, path: Path) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", type=int, default=102)
-    parser.add_argument("--seed", type=int, default=0, help="sweep seed")
-    parser.add_argument("--lifters", default="shipped",
-                        help="comma-separated lifter checkpoints ('shipped' for the packaged weights)")
-    parser.add_argument("--out", type=Path, required=True, help="folder for the per-scene results and summaries")
-    parser.add_argument("--jobs", type=int, default=1, help="scenes calibrated in parallel (one process each)")
-    parser.add_argument("--only", default=None, help="comma-separated scene indices")
+    parser = sweep_arguments(__doc__.splitlines()[0], scenes=102)
     parser.add_argument("--scale-from-lifted", action="store_true",
                         help="keep the world's scale the lifted people's sizes give (no rescaling to a reference adult)")
     parser.add_argument("--no-repair", action="store_true",

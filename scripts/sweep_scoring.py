@@ -8,9 +8,11 @@ A **silent failure** is a view whose focal error exceeds ``SILENT_FOCAL_PCT`` or
 
 from __future__ import annotations
 
+import argparse
 import json
 import multiprocessing
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -164,3 +166,17 @@ def run_jobs(jobs: list, run_and_store, init, init_args: tuple, processes: int) 
         init(*init_args)
         for done, job in enumerate(jobs, 1):
             report(done, run_and_store(job))
+
+
+def sweep_arguments(description: str, scenes: int) -> argparse.ArgumentParser:
+    """The options every sweep takes: ``--scenes`` (default ``scenes``), ``--seed``, ``--lifters``, ``--out``,
+    ``--jobs``, ``--only``."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--scenes", type=int, default=scenes)
+    parser.add_argument("--seed", type=int, default=0, help="sweep seed")
+    parser.add_argument("--lifters", default="shipped",
+                        help="comma-separated lifter checkpoints ('shipped' for the packaged weights)")
+    parser.add_argument("--out", type=Path, required=True, help="folder for the per-scene results and summaries")
+    parser.add_argument("--jobs", type=int, default=1, help="scenes calibrated in parallel (one process each)")
+    parser.add_argument("--only", default=None, help="comma-separated scene indices")
+    return parser
