@@ -1,6 +1,6 @@
-"""The terms of the multi-view bundle adjustment (:mod:`.multiview_focal`): the problem's data, the bounded focal
-parameterization, the whitened residuals, the Huber weights and robust cost, and the normal equations with their
-Schur-complement solve over the per-group point blocks.
+"""The terms of the multi-view bundle adjustment (:mod:`.bundle`): the problem's data, the bounded focal
+parameterization, the whitened residuals, the Huber weights and robust cost, and the normal equations, solved by the engine's
+Schur-complement step (:mod:`humancal.least_squares`) with one block per group.
 
 A view's parameter block is ``[focal (1: fx = fy, or 2: log fx, log fy, bounded), rotation increment (3),
 translation (3)]``, followed, when the problem models the lens (``_Problem.lens``), by ``[k1, k2, dcx, dcy]``: OpenCV's
@@ -8,7 +8,7 @@ radial coefficients on the normalised image coordinates ``(x / z, y / z)`` and t
 one given, pixels. A lens parameter moves only where ``free`` lets it; each has a zero-mean Gaussian prior
 (``lens_prior_w``, 1 / std) that keeps a weakly observed one near the pinhole at the image centre.
 
-Internal to the calibration package: :func:`humancal.calibration.multiview_focal.bundle_adjust` is the entry point
+Internal to the calibration package: :func:`humancal.calibration.bundle.bundle_adjust` is the entry point
 and states the model.
 """
 
@@ -17,9 +17,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
+from scipy.linalg import block_diag
 
 from humancal.geometry.rotations import rotvec_to_rotmat
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
+from humancal.least_squares import ArrowSystem, solve_damped
 
 _LHIP, _RHIP = JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]
 
@@ -292,24 +295,28 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     return Hcc, Hcp, Hpp, gc, gp, _robust_cost(r_obs, r_shape, r_prior, r_scale, p.huber), w_obs
 
 
-def _solve(Hcc, Hcp, Hpp, gc, gp, lam):
-    """The damped Gauss-Newton step by the Schur complement over the point blocks: camera step (V, nc), point
-    step (G, 23, 3), log-scale step (G,), and the reduced camera system S (V nc, V nc).
-
-    One batched solve gives ``Hpp^-1 [Hcp^T | gp]`` per group (no explicit inverse: half the work)."""
+def _arrow(Hcc, Hcp, Hpp, gc, gp) -> ArrowSystem:
+    """The normal equations as the engine's arrow: the cameras (V nc) global, one block per group (3J + 1)."""
     V, nc = gc.shape
-    G, J3 = gp.shape
-    n = V * nc
-    Hpp_d = Hpp + lam * (np.diagonal(Hpp, axis1=1, axis2=2)[..., None] * np.eye(J3) + 1e-9 * np.eye(J3))
-    B = Hcp.reshape(G, n, J3)
-    solved = np.linalg.solve(Hpp_d, np.concatenate([B.transpose(0, 2, 1), gp[:, :, None]], axis=2))
-    Hi_Bt, Hi_gp = solved[..., :n], solved[..., n]  # (G, J3, n), (G, J3)
-    S = np.zeros((n, n))
-    for v in range(V):
-        S[v * nc : (v + 1) * nc, v * nc : (v + 1) * nc] = Hcc[v]
-    S += lam * np.diag(np.maximum(np.diag(S), 1e-12))
-    S -= B.transpose(1, 0, 2).reshape(n, G * J3) @ Hi_Bt.reshape(G * J3, n)
-    rhs = -gc.reshape(n) + np.einsum("gnj,gj->n", B, Hi_gp)
-    dc = np.linalg.solve(S + 1e-12 * np.eye(n), rhs)
-    dp = -(Hi_gp + Hi_Bt @ dc)  # Hpp^-1 (gp + Hcp^T dc)
-    return dc.reshape(V, nc), dp[:, :-1].reshape(G, NUM_JOINTS, 3), dp[:, -1], S
+    G, m = gp.shape
+    as_torch = torch.from_numpy
+    return ArrowSystem(as_torch(block_diag(*Hcc)) if V else torch.zeros(0, 0, dtype=torch.float64),
+                       as_torch(Hpp), as_torch(Hcp.reshape(G, V * nc, m).transpose(0, 2, 1)),
+                       as_torch(gc.reshape(V * nc)), as_torch(gp))
+
+
+def _solve(Hcc, Hcp, Hpp, gc, gp, lam):
+    """The damped Gauss-Newton step (:func:`humancal.least_squares.solve_damped`): camera step (V, nc), point step
+    (G, 23, 3), log-scale step (G,), and the damped reduced camera system S (V nc, V nc).
+
+    Raises:
+        np.linalg.LinAlgError: the damped system is not positive definite.
+    """
+    V, nc = gc.shape
+    G = gp.shape[0]
+    step = solve_damped(_arrow(Hcc, Hcp, Hpp, gc, gp), lam)
+    if not bool(step.solved.all()):
+        raise np.linalg.LinAlgError("bundle adjustment: the damped system is not positive definite")
+    dp = step.block_step.numpy()
+    return (step.global_step.numpy().reshape(V, nc), dp[:, :-1].reshape(G, NUM_JOINTS, 3), dp[:, -1],
+            step.reduced.numpy())

@@ -12,7 +12,7 @@ Steps (each in its own module):
    roots depend on the focal lengths;
 3. cross-view groups (one person in one frame) from the consistent pairs (:mod:`.matching`);
 4. a bundle adjustment over focal lengths, rotations, translations and the groups' keypoints, with the lifted
-   poses as a shape prior up to a size factor per group (:mod:`.multiview_focal`): this recovers the focal
+   poses as a shape prior up to a size factor per group (:mod:`.bundle`): this recovers the focal
    lengths that single views cannot observe (level or straight-down cameras) and removes the bias of the linear
    solve; views the linear solve cannot see start from a resection or the other views' field of view
    (:mod:`.blind_views`);
@@ -40,7 +40,7 @@ from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.known_cameras import anchor_to_known, known_rig_estimate, with_known_intrinsics
 from humancal.calibration.matching import drop_mismatched_detections, groups_from_pairs, spread_groups
 from humancal.calibration.lens import lens_step
-from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
+from humancal.calibration.bundle import bundle_adjust, focal_bounds_from_fov
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.rotation_consensus import average_rotations, pairwise_rotations
 from humancal.calibration.translations import root_positions, solve_focals_translations

@@ -174,7 +174,7 @@ class ExtrinsicsDiagnostics:
             ``"other_views+bundle"`` (neither the linear solve nor a resection gave a plausible focal: started
             from the other views' median field of view, left to the bundle adjustment)),
             ``bundle_status`` (``"ok"``, ``"focal_at_bound"``, ``"behind_camera"``, ``"no_inliers"``: see
-            :class:`~humancal.calibration.multiview_focal.BundleResult`; anything but ``"ok"`` makes the
+            :class:`~humancal.calibration.bundle.BundleResult`; anything but ``"ok"`` makes the
             ``focal_status`` ``"poorly_constrained"``), ``reprojection_rms_px``, ``rotation_edges``, and the view's
             agreement with the others (:func:`~humancal.calibration.view_agreement.view_agreement`):
             ``agreement`` (``"ok"``, ``"disagrees"``, ``"unchecked"``), ``agreement_reason``, ``loo_error_sigma``,

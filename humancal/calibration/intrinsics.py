@@ -15,7 +15,7 @@ shoulder midpoint 2.4 cm (1.7 degrees median lean). ``plumb_top="head"`` gives t
 A view whose focal length is poorly observable from its own people (a nearly level camera: vanishing point
 near infinity; a camera looking straight down: vanishing point at the image centre, where heights only give
 the camera height) is *flagged* (``ill_conditioned``) with its relative uncertainty; the extrinsics stage then
-recovers its focal length from the other views (:mod:`.multiview_focal`).
+recovers its focal length from the other views (:mod:`.bundle`).
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ import pandas as pd
 from humancal.calibration.alignment import align_rig
 from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
 from humancal.calibration.intrinsics import IntrinsicsEstimate
-from humancal.calibration.multiview_focal import BundleResult
+from humancal.calibration.bundle import BundleResult
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.types import hip_midpoints
 from humancal.calibration.view_agreement import view_agreement

@@ -5,7 +5,7 @@ A richer lens always fits the groups it is adjusted on a little better; whether 
 question for groups it was not adjusted on. The groups are split by frame into two folds of alternating blocks of
 consecutive frames (a block, not single frames: neighbouring frames repeat the same poses). For each candidate lens
 the bundle adjustment is fitted on one fold, then the other fold's keypoints are found again with those cameras held
-(:func:`~humancal.calibration.multiview_focal.bundle_adjust` with ``adjust_cameras=False``): the score is that
+(:func:`~humancal.calibration.bundle.bundle_adjust` with ``adjust_cameras=False``): the score is that
 fit's robust cost per held-out group, both its terms (keypoints reprojected, and the people's agreement with their
 lifted poses: a pinhole fitted to a distorting lens reprojects nearly as well, by bending the rig and with it the
 people, whose lifted shapes then disagree); the two folds' scores add up. Candidates go from simple to rich: radial terms first (``pinhole`` ->
@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from humancal.calibration.multiview_focal import BundleResult, bundle_adjust
+from humancal.calibration.bundle import BundleResult, bundle_adjust
 from humancal.calibration.view_repair import check_and_repair_views
 from humancal.camera import intrinsic_matrices
 from humancal.detections import DenseDetections

@@ -117,7 +117,7 @@ def drop_mismatched_detections(groups: list[np.ndarray], error_sigma: np.ndarray
         groups: G arrays of detection rows.
         error_sigma: (S,) per detection of the groups, in the order of ``np.concatenate(groups)``, its median
             reprojection error in units of the keypoint std (:attr:`BundleResult.detection_error_sigma
-            <humancal.calibration.multiview_focal.BundleResult.detection_error_sigma>`); NaN: no keypoint used.
+            <humancal.calibration.bundle.BundleResult.detection_error_sigma>`); NaN: no keypoint used.
         threshold_sigma: a detection above this error is dropped.
         max_fraction: when more than this fraction of the detections is above the threshold, nothing is dropped:
             the rig itself is off, not a few matches, and dropping would throw away the evidence.

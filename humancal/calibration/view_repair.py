@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.calibration.multiview_focal import BundleResult, bundle_adjust
+from humancal.calibration.bundle import BundleResult, bundle_adjust
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.reregister import reregister_view
 from humancal.calibration.view_agreement import AgreementConfig, isolate_disagreeing_views, view_agreement

@@ -12,7 +12,7 @@ camera parametrisation and robust cost, so the two regimes differ only in what t
 
 Solvers (``BodyFitConfig.bundle_solver``):
 
-* ``lm`` (default): Levenberg-Marquardt on the Gauss-Newton system of the robust cost (iteratively reweighted:
+* ``lm`` (default): the library's Levenberg-Marquardt (:mod:`humancal.least_squares`) on the Gauss-Newton system of the robust cost (iteratively reweighted:
   each residual weighted by the Geman-McClure derivative at the current state), with the points eliminated by
   the Schur complement: every point is seen once per view, so the point block is (N, 3, 3) block-diagonal and the
   reduced camera system is (V p) x (V p) for p parameters per view. The Jacobians come from p + 3 forward-mode
@@ -35,6 +35,7 @@ from humancal.camera import CameraRig
 from humancal.fitting.cameras import CameraVariables
 from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.observations import BodyObservations, FittingInputError
+from humancal.least_squares import ArrowSystem, Damping, Stop, levenberg_marquardt, solve_damped
 
 __all__ = ["BundleResult", "bundle_adjust"]
 
@@ -170,46 +171,41 @@ def _lbfgs(cost: _RobustReprojection, free: torch.Tensor, iterations: int) -> No
     free.requires_grad_(False)
 
 
+_DAMPING = Damping(start=1e-3, grow=10.0, shrink=3.0, floor=1e-9, attempts=10)
+
+
 def _levenberg_marquardt(cost: _RobustReprojection, free: torch.Tensor, iterations: int,
                          tolerance: float = 1e-4) -> None:
-    """Minimise ``cost`` over the moving camera parameters and ``free`` (module docstring); writes the result into
-    the camera variables and ``free`` in place."""
+    """Minimise ``cost`` over the moving camera parameters and ``free`` (module docstring) with the library's
+    Levenberg-Marquardt (:mod:`humancal.least_squares`); writes the result into the camera variables and ``free``
+    in place."""
     cams = cost.cams
+
+    def linearize(state):
+        theta, X = state
+        return _normal_equations(cost, theta, X), cost(theta, X)
+
+    def trial(state, system, damping):
+        theta, X = state
+        step = solve_damped(system, damping)
+        if not bool(step.solved.all()):  # a singular system: refused, the damping grows
+            return state, float("inf")
+        new_theta, new_X = theta + step.global_step.reshape(theta.shape), X + step.block_step
+        return (new_theta, new_X), cost(new_theta, new_X)
+
     with torch.no_grad():
-        theta = cams.parameters().detach().clone()
-        X = free.detach().clone()
-        value = _checked(cost(theta, X))
-        damping = 1e-3
-        for _ in range(iterations):
-            H_cc, H_cp, H_pp, g_c, g_p = _normal_equations(cost, theta, X)
-            for _attempt in range(10):
-                try:
-                    step_c, step_p = _damped_step(H_cc, H_cp, H_pp, g_c, g_p, damping)
-                except torch.linalg.LinAlgError:  # a singular system: damp harder, as for a step that failed
-                    damping *= 10.0
-                    continue
-                new_theta, new_X = theta + step_c, X + step_p
-                new_value = cost(new_theta, new_X)
-                if torch.isfinite(new_value) and new_value < value:
-                    break
-                damping *= 10.0
-            else:
-                break  # no damping lowers the cost: converged (or stuck)
-            decrease = float((value - new_value) / value)
-            theta, X, value = new_theta, new_X, new_value
-            damping = max(damping / 3.0, 1e-9)
-            if decrease < tolerance:
-                break
+        start = (cams.parameters().detach().clone(), free.detach().clone())
+        _checked(cost(*start))
+        outcome = levenberg_marquardt(linearize, trial, start, max_iterations=iterations, damping=_DAMPING,
+                                      stop=Stop(tolerance), relinearize_last=False)
+        theta, X = outcome.state
         cams.assign(theta)
         free.copy_(X)
 
 
 def _normal_equations(cost: _RobustReprojection, theta: torch.Tensor, X: torch.Tensor):
-    """The Gauss-Newton system of the robust cost at (theta, X), reweighted by the Geman-McClure derivative.
-
-    Returns:
-        H_cc (V, p, V, p), H_cp (V, N, p, 3), H_pp (N, 3, 3), g_c (V, p), g_p (N, 3).
-    """
+    """The Gauss-Newton system of the robust cost at (theta, X), reweighted by the Geman-McClure derivative: the
+    cameras' V p parameters global, one block per point (3)."""
     V, p = theta.shape
     residual, w = cost.residuals(theta, X)  # (V, N, 2), (V, N)
     r2 = (residual**2).sum(-1)
@@ -235,26 +231,12 @@ def _normal_equations(cost: _RobustReprojection, theta: torch.Tensor, X: torch.T
     H_cc = torch.zeros(V, p, V, p, dtype=theta.dtype)
     H_cc[torch.arange(V), :, torch.arange(V), :] = H_blocks
     H_cc = H_cc + tie_hess.reshape(V, p, V, p)
-    return H_cc, H_cp, H_pp, g_c + tie_grad, g_p
+    N = X.shape[0]
+    return ArrowSystem(H_cc.reshape(V * p, V * p), H_pp, H_cp.permute(1, 3, 0, 2).reshape(N, 3, V * p),
+                       (g_c + tie_grad).reshape(V * p), g_p)
 
 
 def _unit_column(like: torch.Tensor, k: int) -> torch.Tensor:
     out = torch.zeros_like(like)
     out[:, k] = 1.0
     return out
-
-
-def _damped_step(H_cc, H_cp, H_pp, g_c, g_p, damping: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """The Levenberg-Marquardt step (Marquardt's scaling: the diagonal grows by ``1 + damping``), the points
-    eliminated by the Schur complement. Returns the camera step (V, p) and the point step (N, 3)."""
-    V, p = g_c.shape
-    A = H_cc.reshape(V * p, V * p)
-    A = A + torch.diag(damping * A.diagonal() + 1e-12)
-    C = H_pp + torch.diag_embed(damping * H_pp.diagonal(dim1=-2, dim2=-1) + 1e-12)
-    C_inv = torch.linalg.inv(C)  # (N, 3, 3)
-    Y = torch.einsum("vnpa,nab->vnpb", H_cp, C_inv)
-    S = A - torch.einsum("vnpb,wnqb->vpwq", Y, H_cp).reshape(V * p, V * p)
-    rhs = -g_c + torch.einsum("vnpb,nb->vp", Y, g_p)
-    step_c = torch.linalg.solve(S, rhs.reshape(-1)).reshape(V, p)
-    step_p = torch.einsum("nab,nb->na", C_inv, -g_p - torch.einsum("vnpa,vp->na", H_cp, step_c))
-    return step_c, step_p

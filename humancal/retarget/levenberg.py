@@ -1,4 +1,5 @@
-"""Batched Levenberg-Marquardt for the per-frame pose fit, with analytic Jacobians of the mapped points.
+"""The per-frame pose fit: analytic Jacobians of the mapped points, solved frame by frame in parallel by the library's
+batched Levenberg-Marquardt (:mod:`humancal.least_squares`).
 
 Why not autograd + L-BFGS: the kinematic chain makes the problem badly conditioned (a root rotation moves every
 point by up to a metre, a wrist rotation one point by centimetres). On CMU clips L-BFGS needed about 200
@@ -22,6 +23,7 @@ import roma
 import torch
 from torch import Tensor
 
+from humancal.least_squares import ArrowSystem, Damping, Stop, levenberg_marquardt, solve_damped
 from humancal.retarget.points import PointCoefficients, PointModel
 from humancal.retarget.priors import PoseWeights
 
@@ -219,8 +221,11 @@ def frame_costs(
     return cost, rotations, gradient, hessian, data_jacobian, data_residual
 
 
-_ATTEMPTS = 3
-"""Damping levels tried per iteration for the frames whose step was rejected."""
+_DAMPING = Damping(start=1e-6, grow=8.0, shrink=3.0, floor=1e-7, ceiling=1e7, attempts=3)
+"""Start nearly at Gauss-Newton: Marquardt's damping (relative to the Hessian's diagonal) slows the directions that only
+the small pose prior decides (e.g. how a twist splits between two spine bones, whose single rotations the points do
+see), and the start is good enough for full steps; failures raise it. A rejected frame retries at once with more
+damping (same derivatives), three levels per iteration."""
 
 
 def levenberg_marquardt_poses(
@@ -252,49 +257,38 @@ def levenberg_marquardt_poses(
     """
     dtype = coefficients.linear_m.dtype
     rotmats, translation, targets_m = rotmats.to(dtype), translation.to(dtype), targets_m.to(dtype)
-    num_frames = rotmats.shape[0]
     structure = PointStructure(coefficients, points.subtree)
-    # Start nearly at Gauss-Newton: Marquardt's damping (relative to the Hessian's diagonal) slows the directions
-    # that only the small pose prior decides (e.g. how a twist splits between two spine bones, whose single
-    # rotations the points do see), and the start is good enough for full steps; failures raise it.
-    damping = torch.full((num_frames,), 1e-6, dtype=dtype)
-    cost = None
-    for _ in range(iterations):
-        neighbours = _Neighbours(rotmats, translation, previous) if smooth else None
+
+    def neighbours_of(state):  # a Jacobi sweep: every frame's neighbours held at their current values
+        return _Neighbours(*state, previous) if smooth else None
+
+    if iterations < 1:
+        return rotmats, translation, frame_costs(points, coefficients, structure, rotmats, translation, targets_m,
+                                                 weights, neighbours_of((rotmats, translation)))
+
+    def linearize(state):
+        neighbours = neighbours_of(state)
         cost, rotations, gradient, hessian = frame_costs(
-            points, coefficients, structure, rotmats, translation, targets_m, weights, neighbours, derivatives=True
+            points, coefficients, structure, *state, targets_m, weights, neighbours, derivatives=True
         )
-        new_rotmats, new_translation, new_cost = rotmats, translation, cost
-        accept = torch.zeros(num_frames, dtype=torch.bool)
-        # A rejected frame retries at once with more damping (same derivatives), rather than losing an iteration.
-        for attempt in range(_ATTEMPTS):
-            damped = hessian.clone()
-            torch.diagonal(damped, dim1=-2, dim2=-1).mul_(1.0 + damping[:, None]).add_(1e-12)
-            factor, info = torch.linalg.cholesky_ex(damped)
-            step = -torch.cholesky_solve(gradient[..., None], factor)[..., 0]
-            step = torch.where((info == 0)[:, None], step, torch.zeros_like(step))  # not positive definite: no step
-            world_step = step[:, 3:].reshape(num_frames, -1, 3)
-            local_step = (rotations.transpose(-1, -2) @ world_step[..., None])[..., 0]
-            trial_rotmats = rotmats @ roma.rotvec_to_rotmat(local_step)
-            trial_translation = translation + step[:, :3]
-            trial_cost = frame_costs(
-                points, coefficients, structure, trial_rotmats, trial_translation, targets_m, weights, neighbours
-            )
-            better = (trial_cost < cost) & ~accept
-            new_rotmats = torch.where(better[:, None, None, None], trial_rotmats, new_rotmats)
-            new_translation = torch.where(better[:, None], trial_translation, new_translation)
-            new_cost = torch.where(better, trial_cost, new_cost)
-            accept = accept | better
-            if bool(accept.all()) or attempt == _ATTEMPTS - 1:
-                break
-            damping = torch.where(accept, damping, (damping * 8.0).clamp_max(1e7))
-        damping = torch.where(accept, (damping / 3.0).clamp_min(1e-7), (damping * 8.0).clamp_max(1e7))
-        gain = cost - new_cost
-        rotmats, translation, cost = new_rotmats, new_translation, new_cost
-        # Stop when no frame gains more than round-off (relative 1e-10 of its cost, or 1e-14 m^2).
-        if bool((gain <= 1e-10 * cost + 1e-14).all()):
-            break
-    if cost is None:
-        neighbours = _Neighbours(rotmats, translation, previous) if smooth else None
-        cost = frame_costs(points, coefficients, structure, rotmats, translation, targets_m, weights, neighbours)
-    return rotmats, translation, cost
+        return (ArrowSystem.blocks_only(hessian, gradient), rotations, neighbours), cost
+
+    def trial(state, system, damping):
+        arrow, rotations, neighbours = system
+        rotmats, translation = state
+        step = solve_damped(arrow, damping)  # a frame whose damped Hessian is not positive definite: no step
+        world_step = step.block_step[:, 3:].reshape(rotmats.shape[0], -1, 3)
+        local_step = (rotations.transpose(-1, -2) @ world_step[..., None])[..., 0]
+        trial_state = (rotmats @ roma.rotvec_to_rotmat(local_step), translation + step.block_step[:, :3])
+        cost = frame_costs(points, coefficients, structure, *trial_state, targets_m, weights, neighbours)
+        return trial_state, torch.where(step.solved, cost, torch.full_like(cost, float("inf")))
+
+    def select(mask, new, old):
+        return (torch.where(mask[:, None, None, None], new[0], old[0]), torch.where(mask[:, None], new[1], old[1]))
+
+    # Stop when no frame gains more than round-off (relative 1e-10 of its cost, or 1e-14 m^2).
+    outcome = levenberg_marquardt(linearize, trial, (rotmats, translation), max_iterations=iterations,
+                                  damping=_DAMPING, stop=Stop(relative=1e-10, absolute=1e-14), select=select,
+                                  relinearize_last=False)
+    rotmats, translation = outcome.state
+    return rotmats, translation, outcome.cost.to(dtype)

@@ -10,7 +10,8 @@ second-order step follows the priors along it. (Offsets inside the chain are len
 The unknowns are the per-frame pose increments (as in :mod:`humancal.retarget.levenberg`) and the coordinates
 ``phi`` of the offsets in :meth:`PointModel.offset_basis`, ``offsets = basis @ phi``. The normal equations have
 the arrow shape of bundle adjustment; the frames are eliminated (Schur complement) and one small system in
-``phi`` is solved per iteration. The frames need not be consecutive (no smoothness term).
+``phi`` is solved per iteration (the library's Levenberg-Marquardt, :mod:`humancal.least_squares`). The frames
+need not be consecutive (no smoothness term).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import torch
 from torch import Tensor
 
 from humancal.body import RestSkeleton
+from humancal.least_squares import ArrowSystem, Damping, Stop, levenberg_marquardt, solve_damped
 from humancal.retarget.levenberg import PointStructure, frame_costs
 from humancal.retarget.priors import PoseWeights
 from humancal.retarget.points import PointModel
@@ -29,6 +31,9 @@ from humancal.retarget.points import PointModel
 __all__ = ["fit_poses_and_offsets"]
 
 logger = logging.getLogger(__name__)
+
+_DAMPING = Damping(start=1e-3, grow=4.0, shrink=3.0, floor=1e-7, ceiling=1e7, attempts=16)
+"""Refused steps grow the damping fourfold, up to about 1e6 times the diagonal (sixteen tries) before it stops."""
 
 
 def _total_cost(points, rest, basis, phi, rotmats, translation, targets_m, weights, prior_weight):
@@ -85,11 +90,12 @@ def fit_poses_and_offsets(
     basis_per_point = basis.reshape(num_points, 3, k)
     root_weight = points.weight.to(f64).sqrt()
     frame_prior = num_frames * offset_prior_weights.to(f64)
-    damping = 1e-3
-    total, coefficients, structure = _total_cost(
-        points, rest, basis, phi, rotmats, translation, targets_m, weights, offset_prior_weights
-    )
-    for _ in range(iterations):
+
+    def linearize(state):
+        rotmats, translation, phi = state
+        total, coefficients, structure = _total_cost(
+            points, rest, basis, phi, rotmats, translation, targets_m, weights, offset_prior_weights
+        )
         _, rotations, g_x, h_xx, jac_x, residual = frame_costs(
             points, coefficients, structure, rotmats, translation, targets_m, weights, None,
             derivatives=True, jacobian=True,
@@ -97,37 +103,31 @@ def fit_poses_and_offsets(
         # d p_m / d phi = G_carrier(m) @ basis_m, scaled like the residual rows.
         jac_phi = torch.einsum("fmij,mjk->fmik", rotations[:, carrier], basis_per_point)
         jac_phi = (jac_phi * root_weight[None, :, None, None]).reshape(num_frames, 3 * num_points, k)
-        h_xphi = jac_x.transpose(1, 2) @ jac_phi  # (F, N, k)
-        h_phiphi = torch.einsum("fri,frj->ij", jac_phi, jac_phi) + torch.diag(frame_prior)
-        g_phi = torch.einsum("fri,fr->i", jac_phi, residual) + frame_prior * phi
-        while True:
-            damped_xx = h_xx.clone()
-            torch.diagonal(damped_xx, dim1=-2, dim2=-1).mul_(1.0 + damping).add_(1e-12)
-            damped_pp = h_phiphi.clone()
-            torch.diagonal(damped_pp).mul_(1.0 + damping).add_(1e-12)
-            factor = torch.linalg.cholesky(damped_xx)
-            solved = torch.cholesky_solve(torch.cat([g_x[..., None], h_xphi], dim=2), factor)  # H_xx^-1 [g | H_xphi]
-            schur = damped_pp - torch.einsum("fni,fnj->ij", h_xphi, solved[..., 1:])
-            rhs = g_phi - torch.einsum("fni,fn->i", h_xphi, solved[..., 0])
-            step_phi = -torch.linalg.solve(schur, rhs)
-            step_x = -(solved[..., 0] + (solved[..., 1:] @ step_phi))
-            new_translation = translation + step_x[:, :3]
-            world_step = step_x[:, 3:].reshape(num_frames, num_bones, 3)
-            local_step = (rotations.transpose(-1, -2) @ world_step[..., None])[..., 0]
-            new_rotmats = rotmats @ roma.rotvec_to_rotmat(local_step)
-            new_phi = phi + step_phi
-            new_total, new_coefficients, new_structure = _total_cost(
-                points, rest, basis, new_phi, new_rotmats, new_translation, targets_m, weights, offset_prior_weights
-            )
-            if new_total < total or damping > 1e6:
-                break
-            damping *= 4.0
-        if not new_total < total:
-            break
-        gain = float(total - new_total)
-        rotmats, translation, phi = new_rotmats, new_translation, new_phi
-        total, coefficients, structure = new_total, new_coefficients, new_structure
-        damping = max(damping / 3.0, 1e-7)
-        if gain <= 1e-10 * float(total) + 1e-14:
-            break
-    return rotmats, translation, phi, float(total)
+        system = ArrowSystem(
+            global_hessian=torch.einsum("fri,frj->ij", jac_phi, jac_phi) + torch.diag(frame_prior),
+            block_hessian=h_xx,
+            cross=jac_x.transpose(1, 2) @ jac_phi,  # (F, N, k)
+            global_gradient=torch.einsum("fri,fr->i", jac_phi, residual) + frame_prior * phi,
+            block_gradient=g_x,
+        )
+        return (system, rotations), total
+
+    def trial(state, linearization, damping):
+        system, rotations = linearization
+        rotmats, translation, phi = state
+        step = solve_damped(system, damping)
+        if not bool(step.solved.all()):
+            return state, float("inf")
+        world_step = step.block_step[:, 3:].reshape(num_frames, num_bones, 3)
+        local_step = (rotations.transpose(-1, -2) @ world_step[..., None])[..., 0]
+        new_state = (rotmats @ roma.rotvec_to_rotmat(local_step), translation + step.block_step[:, :3],
+                     phi + step.global_step)
+        total = _total_cost(points, rest, basis, new_state[2], *new_state[:2], targets_m, weights,
+                            offset_prior_weights)[0]
+        return new_state, total
+
+    outcome = levenberg_marquardt(linearize, trial, (rotmats, translation, phi), max_iterations=iterations,
+                                  damping=_DAMPING, stop=Stop(relative=1e-10, absolute=1e-14),
+                                  relinearize_last=False)
+    rotmats, translation, phi = outcome.state
+    return rotmats, translation, phi, float(outcome.cost)

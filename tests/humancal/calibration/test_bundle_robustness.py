@@ -6,7 +6,7 @@ import pytest
 import humancal.calibration.extrinsics as extrinsics_module
 from evaluation.camera_metrics import camera_errors
 from humancal.calibration import CalibrationError, ExtrinsicsConfig, LiftedPoses, estimate_extrinsics, estimate_intrinsics
-from humancal.calibration.multiview_focal import bundle_adjust, focal_bounds_from_fov
+from humancal.calibration.bundle import bundle_adjust, focal_bounds_from_fov
 
 
 @pytest.fixture(scope="module")
@@ -133,7 +133,7 @@ def test_a_still_person_seen_in_many_frames_counts_once_in_the_focal_uncertainty
 
 
 def test_groups_repeat_one_another_only_when_their_keypoints_coincide():
-    from humancal.calibration.multiview_focal import _repeats
+    from humancal.calibration.bundle import _repeats
 
     rng = np.random.default_rng(0)
     person = rng.normal(size=(23, 3))

@@ -8,7 +8,7 @@ from evaluation.oracle import lift_ground_truth, upright_scores
 from humancal.calibration import CalibrationError, align_rig, align_to_floor, plot_rigs
 from humancal.calibration.floor import NoFloorError
 from humancal.synthetic.activities import ACTIVITIES
-from humancal.calibration.multiview_focal import bundle_adjust
+from humancal.calibration.bundle import bundle_adjust
 from humancal.geometry.alignment import fit_similarity
 from humancal.geometry.rotations import rotvec_to_rotmat
 from humancal.lifter import standing_score

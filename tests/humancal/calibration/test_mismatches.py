@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from humancal.calibration.matching import drop_mismatched_detections
-from humancal.calibration.multiview_focal import bundle_adjust
+from humancal.calibration.bundle import bundle_adjust
 
 
 @pytest.fixture(scope="module")

@@ -15,9 +15,9 @@ Residuals (all in units of their standard deviation):
   coefficients and on its principal point's offset from the one given (``lens_prior_std``).
 
 Reprojection and shape residuals are robustified with Huber weights (iteratively reweighted). The solver is
-Levenberg-Marquardt on the normal equations with the Schur complement over the per-group point blocks (the
-residuals and normal equations live in :mod:`.bundle_terms`), so the cost grows linearly with the number of
-groups (scipy's ``least_squares`` solves the reduced camera system with an iterative sparse solver that does not
+the library's Levenberg-Marquardt (:mod:`humancal.least_squares`) on the normal equations, with the Schur
+complement over the per-group point blocks (the residuals and normal equations live in :mod:`.bundle_terms`), so
+the cost grows linearly with the number of groups (scipy's ``least_squares`` solves the reduced camera system with an iterative sparse solver that does not
 exploit the 70 x 70 point blocks: the direct Schur solve is kept).
 
 The solver cannot diverge:
@@ -56,11 +56,13 @@ from humancal.calibration.bundle_terms import (
     _robust_cost,
     _normal_equations,
     _solve,
+    _arrow,
 )
 from humancal.calibration.types import CalibrationError
 from humancal.lifter.lifted import LiftedPoses
 from humancal.detections import DenseDetections
 from humancal.geometry.rotations import rotvec_to_rotmat
+from humancal.least_squares import Damping, Stop, levenberg_marquardt, solve_damped
 
 __all__ = ["BundleResult", "bundle_adjust", "focal_bounds_from_fov"]
 
@@ -70,6 +72,9 @@ frames): their lifter and detector errors are the same, so they count as one in 
 
 _STILL_ITERATIONS = 3
 """Iterations in a row with the cameras still (``camera_tolerance``) after which the bundle adjustment stops."""
+
+_DAMPING = Damping(start=1e-3, grow=10.0, shrink=5.0, floor=1e-7, attempts=10)
+"""The Levenberg-Marquardt schedule: ten refusals in a row (damping 1e-3 -> 1e7 times the diagonal) end it."""
 
 logger = logging.getLogger(__name__)
 
@@ -292,8 +297,6 @@ def bundle_adjust(
     cams[:, nf + 3 : nf + 6] = t_init
     if prob.lens:
         cams[:, nf + 6 :] = 0.0 if lens_start is None else np.asarray(lens_start, dtype=np.float64)
-    R0 = R_init.copy()
-    log_q = np.zeros(G)
     free = np.ones((V, nc), bool)
     held = np.zeros(V, bool)
     held[list(hold_views)] = True
@@ -309,39 +312,43 @@ def bundle_adjust(
         free[:, nf + 6 :] &= moving[None]
         free[list(hold_lens_views), nf + 6 :] = False
 
-    lam, converged, it, rejected, still = 1e-3, False, 0, 0, 0
     scale_m = max(float(np.median(np.linalg.norm(t_init, axis=1))), 1e-3)
-    Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
-    if not np.isfinite(cost):
-        raise CalibrationError("bundle adjustment: the starting cost is not finite (non-finite keypoints or poses)")
     if not free.any():
         camera_tolerance = 0.0  # the cameras never move: only the cost ends the iterations
-    for it in range(1, max_iterations + 1):
-        improved = False
-        for _ in range(10):
-            step = _damped_step(prob, Hcc, Hcp, Hpp, gc, gp, lam, cams, R0, X, log_q, huber)
-            if step is not None and step[-1] < cost:
-                new_cams, new_X, new_q, new_cost = step
-                improved = True
-                break
-            # divergence (cost increase, non-finite values, singular system): back to the last good state
-            rejected += 1
-            lam *= 10.0
-        if not improved:
-            converged = True
-            break
-        moved = _camera_step(prob, cams, new_cams, nf, scale_m)
+    still = 0
+
+    def linearize(state):
+        cams, R0, X, log_q = state
+        Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
+        return (Hcc, Hcp, Hpp, gc, gp, w_obs), cost
+
+    def trial(state, system, lam):
+        cams, R0, X, log_q = state
+        step = _damped_step(prob, *system[:5], lam, cams, R0, X, log_q, huber)
+        if step is None:  # a singular system or non-finite values: refused like a cost increase
+            return state, np.inf
+        return (step[0], R0, step[1], step[2]), step[3]
+
+    def accepted(old, new):
+        nonlocal still
+        moved = _camera_step(prob, old[0], new[0], nf, scale_m)
         still = still + 1 if moved < camera_tolerance else 0
         # fold the rotation increment into R0 so the increment parameters stay near zero
-        R0 = rotvec_to_rotmat(new_cams[:, nf : nf + 3]) @ R0
-        new_cams[:, nf : nf + 3] = 0.0
-        cams, X, log_q = new_cams, new_X, new_q
-        lam = max(lam / 5.0, 1e-7)
-        old = cost
-        Hcc, Hcp, Hpp, gc, gp, cost, w_obs = _normal_equations(prob, cams, R0, X, log_q, free)
-        if (old - cost) / max(old, 1e-12) < tolerance or still >= _STILL_ITERATIONS:
-            converged = True
-            break
+        cams = new[0].copy()
+        R0 = rotvec_to_rotmat(cams[:, nf : nf + 3]) @ new[1]
+        cams[:, nf : nf + 3] = 0.0
+        return (cams, R0, new[2], new[3]), still >= _STILL_ITERATIONS
+
+    try:
+        outcome = levenberg_marquardt(linearize, trial, (cams, R_init.copy(), X, np.zeros(G)),
+                                      max_iterations=max_iterations, damping=_DAMPING, stop=Stop(tolerance),
+                                      accepted=accepted)
+    except FloatingPointError:
+        raise CalibrationError("bundle adjustment: the starting cost is not finite (non-finite keypoints or "
+                               "poses)") from None
+    cams, R0, X, log_q = outcome.state
+    cost, w_obs = outcome.cost, outcome.system[5]
+    it, rejected, converged = outcome.iterations, outcome.refused, outcome.converged
     nf = _focal_count(prob)
     dlogf = _log_focal(prob, cams[:, :nf])[1][:, 0]
     params_std = _camera_std(prob, cams, R0, X, log_q, free, w_obs)
@@ -406,11 +413,13 @@ def _camera_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
     share = 1.0 / np.sqrt(_repeats(X))  # (G,) whitened residuals scaled: information / repeats
     honest = replace(prob, shape_w=prob.shape_w / np.sqrt(prob.shape_w.shape[1]) * share[prob.s_group, None],
                      o_w=prob.o_w * share[prob.o_group])
+    Hcc, Hcp, Hpp, gc, gp, _, _ = _normal_equations(honest, cams, R0, X, log_q, free)
+    undamped = solve_damped(_arrow(Hcc, Hcp, Hpp, gc, gp), 0.0)
+    S = undamped.reduced.numpy()
+    if not (bool(undamped.blocks_factored.all()) and np.isfinite(S).all()):
+        logger.warning("bundle adjustment: singular final system, focal uncertainties unknown")
+        return np.full((V, nc), np.inf)
     try:
-        Hcc, Hcp, Hpp, gc, gp, _, _ = _normal_equations(honest, cams, R0, X, log_q, free)
-        _, _, _, S = _solve(Hcc, Hcp, Hpp, gc, gp, 0.0)
-        if not np.isfinite(S).all():
-            return np.full((V, nc), np.inf)
         cov = np.linalg.pinv(S)
     except np.linalg.LinAlgError:
         logger.warning("bundle adjustment: singular final system, focal uncertainties unknown")
