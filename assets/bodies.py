@@ -1,7 +1,6 @@
 """Per sequence: every person's body shape and motion fitted to the associated detections through the motion
 prior, and the cameras refined together with them (the paper's III-E; ``docs/bodies.md``, ``docs/refinement.md``)."""
 
-import functools
 import tempfile
 from pathlib import Path
 
@@ -10,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from assets.common import UPDATE_CONDITION, latest_metadata_float, png_metadata, table_metadata, table_output
+from assets.motion_prior import prior_from_checkpoint
 from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
 from humancal.camera import CameraRig
@@ -17,25 +17,15 @@ from humancal.fitting import body_observations, fit_bodies
 from humancal.fitting.plot import plot_fit_reprojection, plot_fit_scene
 from humancal.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
-from humancal.prior import read_prior_info, shipped_prior
-from humancal.prior.weights import SHIPPED_VARIANT_STEMS
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
+from resources.io_managers import checkpoint_content_version
 from resources.torch import TorchResource
 
 
-@functools.lru_cache(maxsize=2)
-def fitting_prior(variant: str = "motion_prior"):
-    """The shipped prior of ``variant`` (loaded once per process)."""
-    return shipped_prior(variant)[0]
-
-
-def _weights_digest(variant: str) -> str:
-    return str(read_prior_info(SHIPPED_VARIANT_STEMS[variant])["digest"])[:12]
-
-
-CODE_VERSION = f"12-prior-{_weights_digest('motion_prior')}"
-"""The code version names the shipped prior's weights digest: new weights make every fit stale."""
+CODE_VERSION = "13"
+"""13: the prior is an input (``motion_prior_checkpoint``): new weights make every fit stale through its data
+version."""
 
 
 _OUTPUTS = {
@@ -57,10 +47,12 @@ _OUTPUTS = {
 )
 def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_model: BodyModelResource,
              torch_runtime: TorchResource, datasets: DatasetsResource, detections: pd.DataFrame,
-             associations: pd.DataFrame, skeletons3d: pd.DataFrame, extrinsics: pd.DataFrame):
+             associations: pd.DataFrame, skeletons3d: pd.DataFrame, extrinsics: pd.DataFrame,
+             motion_prior_checkpoint: dict):
     """Fit shape and motion of every tracked person and refine the cameras with them
     (``humancal.fitting.fit_bodies``): from the detections, the association and the calibrated cameras only
-    (never ground truth). A capture whose cameras are all known holds them (regime ``fixed``) unless its
+    (never ground truth), through the motion prior in force (``motion_prior_checkpoint``). A capture whose cameras
+    are all known holds them (regime ``fixed``) unless its
     ``cameras`` option says ``refine``."""
     sequence = context.partition_key
     spec = datasets.spec(sequence)
@@ -77,7 +69,8 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
     context.log.info(f"{sequence}: fitting {observations.num_people} people over {observations.num_frames} frames "
                      f"in {observations.num_views} views at {fps:g} fps ({fps_source})")
     with torch_runtime.applied():
-        result = fit_bodies(body, observations, rig, fitting_prior(), fit_config, fps=fps,
+        prior = prior_from_checkpoint(motion_prior_checkpoint)
+        result = fit_bodies(body, observations, rig, prior, fit_config, fps=fps,
                             warnings=tuple(warnings))
     table = result.motions.to_table(sequence)
     refined = result.cameras
@@ -98,7 +91,7 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
         fps=fps, reprojection_error_px=round(result.reprojection_error_px, 3), cameras=fit_config.cameras,
         **{f"seconds_{stage}": round(s, 3) for stage, s in result.stage_seconds.items()},
         **{f"loss_{term}": float(v) for term, v in result.loss_terms.items()},
-        prior_weights=_weights_digest("motion_prior"), warnings="; ".join(result.warnings) or "none", **pictures)
+        prior_weights=checkpoint_content_version(motion_prior_checkpoint)[:12], warnings="; ".join(result.warnings) or "none", **pictures)
     changes = _camera_changes(rig, refined)
     context.log.info(f"{sequence}: cameras ({fit_config.cameras}) moved by " + ", ".join(
         f"{k} {v:.3g}" for k, v in changes.items()))

@@ -5,8 +5,8 @@ leaves it alone; ``humancal benchmark`` computes it."""
 import dagster as dg
 import pandas as pd
 
-from assets.bodies import fitting_prior
 from assets.common import ON_REQUEST_KEY, table_metadata, table_output
+from assets.motion_prior import prior_from_checkpoint
 from assets.metric_tables import failed_camera_checks
 from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
@@ -14,10 +14,12 @@ from evaluation.method_comparison import METHODS, method_metric_table
 from humancal.camera import cameras_from_table
 from humancal.inputs import sequence_fps
 from humancal.lifter import lifted_from_table
+from humancal.prior import shipped_prior
 from humancal.prior.weights import PriorWeightsError
 from humancal.tables import empty_table
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
+from resources.prior_source import FIT_VARIANT
 from resources.torch import TorchResource
 
 DEFAULT_METHODS = [m for m in METHODS if m != "int_ext"]
@@ -33,18 +35,27 @@ class MethodTableSettings(BodyFitSettings):
         return BodyFitSettings(**self.model_dump(exclude={"methods"})).to_library()
 
 
-def _prior_or_none(variant: str):
-    try:
-        return fitting_prior(variant)
-    except PriorWeightsError:
-        return None
+def _priors(fit_checkpoint: dict):
+    """The priors by variant: the one in force for the fit's own variant, the shipped ablations (None where none
+    ships)."""
+    fit_prior = prior_from_checkpoint(fit_checkpoint)
+
+    def prior(variant: str):
+        if variant == FIT_VARIANT:
+            return fit_prior
+        try:
+            return shipped_prior(variant)[0]
+        except PriorWeightsError:
+            return None
+
+    return prior
 
 
 @dg.asset(
     partitions_def=SEQUENCES,
     group_name="benchmark",
     metadata={**table_metadata("metrics"), ON_REQUEST_KEY: "humancal benchmark"},
-    code_version="10",
+    code_version="11",
     description="The paper's regimes (ext, gt_cameras, init, separate, per_frame_prior, no_prior and the prior "
                 "ablations whose weights exist), and int_ext with the true principal points (a diagnostic), fitted "
                 "and scored on one sequence; convention_floor: the cameras the self-calibration's convention allows "
@@ -54,7 +65,7 @@ def method_tables(context: dg.AssetExecutionContext, config: MethodTableSettings
                   body_model: BodyModelResource, torch_runtime: TorchResource, raw_detections: pd.DataFrame,
                   detections: pd.DataFrame, extrinsics: pd.DataFrame, gt_cameras: pd.DataFrame,
                   gt_poses3d: pd.DataFrame, gt_associations: pd.DataFrame, associations: pd.DataFrame,
-                  skeletons3d: pd.DataFrame, gt_motions: pd.DataFrame) -> dg.Output:
+                  skeletons3d: pd.DataFrame, gt_motions: pd.DataFrame, motion_prior_checkpoint: dict) -> dg.Output:
     """Fit every method of ``config.methods`` (``evaluation.method_comparison.METHODS``) and score it."""
     unknown = sorted(set(config.methods) - set(METHODS))
     if unknown:
@@ -68,7 +79,7 @@ def method_tables(context: dg.AssetExecutionContext, config: MethodTableSettings
     dense, lifted = lifted_from_table(detections)
     with torch_runtime.applied():
         table = method_metric_table(
-            spec, methods=list(config.methods), priors=_prior_or_none, body=body_model.get(),
+            spec, methods=list(config.methods), priors=_priors(motion_prior_checkpoint), body=body_model.get(),
             config=config.to_library(), fps=sequence_fps(spec)[0], dense=dense, lifted=lifted,
             detections=raw_detections, associations=associations, skeletons3d=skeletons3d,
             cameras=cameras_from_table(extrinsics), gt_associations=gt_associations, gt_poses3d=gt_poses3d,

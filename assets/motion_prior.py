@@ -1,10 +1,12 @@
-"""Shared by all sequences: the motion prior, one checkpoint per variant trained on the retargeted CMU mocap, and
-its held-out figures (docs/motion_prior.md).
+"""Shared by all sequences: the motion prior, one checkpoint per variant trained on the retargeted CMU mocap, its
+held-out figures (docs/motion_prior.md), and the checkpoint the body fit uses.
 
-Both assets are partitioned by variant (``PRIOR_VARIANT_PARTITIONS``: the default ``motion_prior`` and the
-ablations) and computed on request only: ``humancal train prior [--variant V]``, the ``prior_training`` job,
-its weekly schedule or the mocap-change sensor (``pipelines/sensors.py``); never by a plain ``humancal update``.
-Until then the weights shipped with humancal serve the library.
+``motion_prior_trained`` and ``prior_metrics`` are partitioned by variant (``PRIOR_VARIANT_PARTITIONS``: the default
+``motion_prior`` and the ablations) and computed on request only: ``humancal train prior [--variant V]``, the
+``prior_training`` job, its weekly schedule or the mocap-change sensor (``pipelines/sensors.py``); never by a plain
+``humancal update``. ``motion_prior_checkpoint`` serves the prior in force (:mod:`resources.prior_source`): the
+weights shipped with humancal until the default variant has been trained here, then those. It is an input of the
+body fit, so a retrained prior makes every fitted motion stale and the next ``humancal update`` refits them.
 """
 
 import hashlib
@@ -18,7 +20,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from assets.common import ON_REQUEST_KEY, png_metadata, table_metadata, table_output, versioned_output
+from assets.common import ON_REQUEST_KEY, UPDATE_CONDITION, png_metadata, table_metadata, table_output, versioned_output
 from assets.lifter import HELD_OUT_SEQUENCE
 from evaluation.protocols import MetricRow, metrics_table
 from humancal.prior import PRIOR_VARIANTS, MotionVAE, PriorConfig, rotmats_to_pose6d
@@ -31,9 +33,11 @@ from humancal.prior.evaluate import (
 )
 from humancal.prior.plot import plot_latent_interpolation, plot_prior_samples, plot_training_history
 from humancal.prior.train import train_motion_prior
+from humancal.prior.weights import PriorWeightsError
 from humancal.retarget import motions_table_to_clips
 from resources.body_model import BodyModelResource
 from resources.io_managers import checkpoint_content_version
+from resources.prior_source import active_prior, shipped_active_prior
 from resources.torch import TorchResource
 
 PRIOR_VARIANT_PARTITIONS = dg.StaticPartitionsDefinition(list(PRIOR_VARIANTS))
@@ -77,9 +81,10 @@ def prior_checkpoint(trained) -> dict:
 
 
 def prior_from_checkpoint(checkpoint: dict) -> MotionVAE:
-    """The motion VAE of a checkpoint written by :func:`prior_checkpoint` (eval mode)."""
+    """The motion VAE of a checkpoint written by :func:`prior_checkpoint` (eval mode, parameters frozen)."""
     model = MotionVAE(PriorConfig.from_dict(checkpoint["config"]))
     model.load_state_dict(checkpoint["state_dict"])
+    model.requires_grad_(False)
     return model.eval()
 
 
@@ -92,8 +97,9 @@ def build_motion_prior_assets(
     configs: Mapping[str, PriorConfig] | None = None,
     evaluation: PriorEvaluationSettings | None = None,
     train_workers: int = 2,
+    storage_root: str | None = None,
 ) -> list[dg.AssetsDefinition]:
-    """``motion_prior_checkpoint`` and ``prior_metrics``, partitioned by variant.
+    """``motion_prior_trained`` and ``prior_metrics``, partitioned by variant, and ``motion_prior_checkpoint``.
 
     Args:
         configs: training configuration by variant (default :meth:`PriorConfig.default` of each; tests use tiny
@@ -102,6 +108,8 @@ def build_motion_prior_assets(
         train_workers: processes sharing each training step (``humancal.prior.train_motion_prior``'s ``workers``,
             one intra-op thread each; 2 suits a 2-core machine). Part of the checkpoint's code version: the
             worker count changes the windows drawn.
+        storage_root: the artifacts root where ``motion_prior_trained`` is stored (None: the shipped prior is
+            the one in force).
     """
     configs = dict(configs or {v: PriorConfig.default(v) for v in PRIOR_VARIANTS})
     missing = [v for v in PRIOR_VARIANTS if v not in configs or configs[v].variant != v]
@@ -121,7 +129,7 @@ def build_motion_prior_assets(
         code_version=f"2-{_configs_digest(configs)}-{train_workers}w",
         metadata={ON_REQUEST_KEY: TRAIN_COMMAND},
     )
-    def motion_prior_checkpoint(
+    def motion_prior_trained(
         context: dg.AssetExecutionContext, torch_runtime: TorchResource, body_model: BodyModelResource,
         mocap_clips: pd.DataFrame,
     ) -> dg.Output:
@@ -162,24 +170,45 @@ def build_motion_prior_assets(
     )
     def prior_metrics(
         context: dg.AssetExecutionContext, torch_runtime: TorchResource, body_model: BodyModelResource,
-        mocap_clips: pd.DataFrame, motion_prior_checkpoint: dict,
+        mocap_clips: pd.DataFrame, motion_prior_trained: dict,
     ) -> dg.Output:
         """Held-out figures of one variant: reconstruction (method ``motion_prior[/<variant>]``) and the denoising
         benchmark in 3D and through four virtual cameras (metrics suffixed ``/views_2d``); the default variant's
         partition also holds the no-prior fit (docs/motion_prior.md, "Evaluation")."""
         variant = context.partition_key
-        prior = prior_from_checkpoint(motion_prior_checkpoint)
-        held = set(motion_prior_checkpoint["val_subjects"])
+        prior = prior_from_checkpoint(motion_prior_trained)
+        held = set(motion_prior_trained["val_subjects"])
         clips = [c for c in motions_table_to_clips(mocap_clips) if c.subject in held]
         body = body_model.get()
         with torch_runtime.applied():
             table, summary = prior_metric_rows(prior, variant, clips, body, evaluation,
-                                               float(motion_prior_checkpoint["train_seconds"]))
+                                               float(motion_prior_trained["train_seconds"]))
         context.log.info("\n" + summary.to_string(float_format=lambda v: f"{v:.1f}"))
         return table_output(table, "metrics", rows=len(table),
                             summary=dg.MetadataValue.md(summary.to_markdown(floatfmt=".1f")))
 
-    return [motion_prior_checkpoint, prior_metrics]
+    active = active_prior(storage_root) if storage_root is not None else shipped_active_prior()
+
+    @dg.asset(
+        group_name="motion_prior",
+        io_manager_key="checkpoint_io_manager",
+        code_version=f"1-{active.source}-{active.digest[:16]}",
+        automation_condition=UPDATE_CONDITION,
+    )
+    def motion_prior_checkpoint(context: dg.AssetExecutionContext) -> dg.Output:
+        """The motion prior every body fit uses: the weights shipped with humancal, or, once ``humancal train
+        prior`` has trained the default variant here, those (``motion_prior_trained``)."""
+        checkpoint = active.load()
+        if active.source == "trained" and checkpoint_content_version(checkpoint) != active.digest:
+            raise PriorWeightsError(f"{active.path}: its weights changed since the definitions loaded; reload the "
+                                    "definitions (restart `humancal`, or reload the code location in the UI)")
+        context.log.info(active.describe())
+        return versioned_output(checkpoint, checkpoint_content_version(checkpoint), source=active.source,
+                                path=str(active.path), description=active.describe(),
+                                train_subjects=", ".join(checkpoint["train_subjects"]),
+                                held_out_subjects=", ".join(checkpoint["val_subjects"]))
+
+    return [motion_prior_trained, prior_metrics, motion_prior_checkpoint]
 
 
 def prior_metric_rows(prior: MotionVAE, variant: str, held_out_clips: list, body, evaluation: PriorEvaluationSettings,

@@ -54,7 +54,7 @@ def build_definitions(
         lifter_config: training configuration of ``lifter_trained`` (default :meth:`LifterConfig.default`, the
             configuration of the shipped weights; tests use a small one).
         datasets: the datasets resource (default: the packaged config and ``HUMANCAL_DATA_DIR``).
-        prior_configs: training configuration of ``motion_prior_checkpoint`` by variant (default: each variant's
+        prior_configs: training configuration of ``motion_prior_trained`` by variant (default: each variant's
             :meth:`PriorConfig.default`; tests use tiny ones).
         prior_evaluation: size of the held-out benchmark of ``prior_metrics`` (tests use a small one).
     """
@@ -64,7 +64,7 @@ def build_definitions(
         "lifter_training_job", selection=dg.AssetSelection.assets("mocap_clips", "lifter_trained"),
         description="Retarget the CMU mocap of the data root and train the lifter on it (it then replaces the "
                     "shipped weights; `humancal update` re-lifts every sequence with it).")
-    prior_assets = build_motion_prior_assets(prior_configs, prior_evaluation)
+    prior_assets = build_motion_prior_assets(prior_configs, prior_evaluation, storage_root=root)
     prior_training = prior_training_job()
     return dg.Definitions(
         # benchmark_table, stage_timings (group benchmark_summary): unpartitioned, read every partition's tables

@@ -25,7 +25,7 @@ DEFAULT_VARIANT = "motion_prior"
 MOCAP_FOLDER = ("cmu_mocap", "bvh_daz")
 """Where ``mocap_clips`` reads the BVH clips under the data root."""
 MOCAP_PATTERN = "*.bvh.gz"
-RETRAIN_SELECTION = ("mocap_clips", "motion_prior_checkpoint", "prior_metrics")
+RETRAIN_SELECTION = ("mocap_clips", "motion_prior_trained", "prior_metrics")
 """What a scheduled or sensed retraining materializes."""
 
 

@@ -60,7 +60,7 @@ def cmd_train(args) -> int:
 
 
 def _train_prior(args) -> int:
-    """Train one variant of the motion prior (partition of ``motion_prior_checkpoint``) and compute its held-out
+    """Train one variant of the motion prior (partition of ``motion_prior_trained``) and compute its held-out
     figures (``prior_metrics``), retargeting the mocap first if it never was."""
     import dagster as dg
 
@@ -79,7 +79,7 @@ def _train_prior(args) -> int:
     if dg.AssetKey("mocap_clips") in missing:
         raise SystemExit(f"humancal: training the motion prior needs {missing[dg.AssetKey('mocap_clips')]}/ under the "
                          "data root (set HUMANCAL_DATA_DIR)")
-    selection = [dg.AssetKey("motion_prior_checkpoint"), dg.AssetKey("prior_metrics")]
+    selection = [dg.AssetKey("motion_prior_trained"), dg.AssetKey("prior_metrics")]
     if instance.get_latest_materialization_event(dg.AssetKey("mocap_clips")) is None:
         selection.insert(0, dg.AssetKey("mocap_clips"))
     config = configs[variant]
@@ -94,4 +94,7 @@ def _train_prior(args) -> int:
         print("humancal: training the motion prior failed (see the log above)", file=sys.stderr)
         return 1
     print("`humancal report --partition cmu_mocap__held_out_02_14` shows its figures")
+    if variant == "motion_prior":
+        print("`humancal update` now refits every sequence's bodies with it (the body fit's prior is the "
+              "motion_prior_checkpoint asset: this prior)")
     return 0

@@ -51,7 +51,7 @@ def motions(body_model):
 
 
 def _materialize(motions, tmp_path, seed: int, variant: str = "motion_prior",
-                 selection=("motion_prior_checkpoint", "prior_metrics")):
+                 selection=("motion_prior_trained", "prior_metrics")):
     @dg.asset(name="mocap_clips")
     def stub_mocap_clips():
         return motions
@@ -84,11 +84,11 @@ def first_run(motions, tmp_path_factory):
 
 def test_checkpoint_and_metric_rows(first_run):
     root, result, events = first_run
-    checkpoint = result.output_for_node("motion_prior_checkpoint")
+    checkpoint = result.output_for_node("motion_prior_trained")
     model = prior_from_checkpoint(checkpoint)
     assert model.config.variant == "motion_prior" and model.latent_dim == PriorConfig.tiny().latent_dim
     assert set(checkpoint["val_subjects"]) == {"02", "14"}
-    metadata = events["motion_prior_checkpoint"].materialization.metadata
+    metadata = events["motion_prior_trained"].materialization.metadata
     for key in ("history", "interpolation", "samples"):
         assert "data:image/png;base64," in metadata[key].value
     table = validate_table(result.output_for_node("prior_metrics"), "metrics")
@@ -106,11 +106,11 @@ def test_checkpoint_and_metric_rows(first_run):
 
 def test_data_version_follows_the_weights(motions, first_run, tmp_path):
     _, result, events = first_run
-    first = events["motion_prior_checkpoint"].materialization.tags["dagster/data_version"]
-    assert first == checkpoint_content_version(result.output_for_node("motion_prior_checkpoint"))
+    first = events["motion_prior_trained"].materialization.tags["dagster/data_version"]
+    assert first == checkpoint_content_version(result.output_for_node("motion_prior_trained"))
     motions.to_parquet(tmp_path / "mocap_clips.parquet")
-    _, other = _materialize(motions, tmp_path, seed=1, selection=["motion_prior_checkpoint"])
-    assert other["motion_prior_checkpoint"].materialization.tags["dagster/data_version"] != first
+    _, other = _materialize(motions, tmp_path, seed=1, selection=["motion_prior_trained"])
+    assert other["motion_prior_trained"].materialization.tags["dagster/data_version"] != first
 
 
 def test_variant_partitions_and_update_never_trains(tmp_path):
@@ -120,11 +120,11 @@ def test_variant_partitions_and_update_never_trains(tmp_path):
 
     defs = build_definitions(storage_root=str(tmp_path))
     graph = defs.resolve_asset_graph()
-    for name in ("motion_prior_checkpoint", "prior_metrics"):
+    for name in ("motion_prior_trained", "prior_metrics"):
         assert graph.get(dg.AssetKey(name)).metadata[ON_REQUEST_KEY] == "humancal train prior"
     instance = dg.DagsterInstance.ephemeral()
     instance.add_dynamic_partitions("sequences", ["synthetic__demo"])
     considered = {key.to_user_string() for key, _, _ in stale_asset_partitions(defs, instance, ["synthetic__demo"])}
-    assert considered and not considered & {"motion_prior_checkpoint", "prior_metrics", "mocap_clips"}
+    assert considered and not considered & {"motion_prior_trained", "prior_metrics", "mocap_clips"}
     with pytest.raises(ValueError, match="one PriorConfig per variant"):
         build_motion_prior_assets({"motion_prior": PriorConfig.tiny()})

@@ -46,6 +46,9 @@ def materialized(tmp_path_factory, body_model):
     _write(storage, "extrinsics", scene.cameras.assign(sequence=PARTITION), "cameras")
     with dg.instance_for_test(temp_dir=str(tmp_path_factory.mktemp("home"))) as instance:
         instance.add_dynamic_partitions(SEQUENCES.name, [PARTITION])
+        # the shared input of the body fit (unpartitioned: its own run)
+        dg.materialize(assets=list(defs.assets), resources=defs.resources, instance=instance,
+                       selection=dg.AssetSelection.assets("motion_prior_checkpoint"))
         result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
                                 selection=dg.AssetSelection.assets(*ASSETS), partition_key=PARTITION,
                                 instance=instance, run_config={"ops": {
@@ -106,7 +109,8 @@ def test_fitted_motions_and_body_metric_rows(materialized):
     result, storage, scene, defs = materialized
     graph = defs.resolve_asset_graph()
     parents = {k.to_user_string() for k in graph.get(dg.AssetKey("fitted_motions")).parent_keys}
-    assert parents == {"detections", "associations", "skeletons3d", "extrinsics"}  # never ground truth
+    # never ground truth; the prior through the graph (lineage)
+    assert parents == {"detections", "associations", "skeletons3d", "extrinsics", "motion_prior_checkpoint"}
     assert graph.get(dg.AssetKey("refined_cameras")).parent_keys == graph.get(dg.AssetKey("fitted_motions")).parent_keys
     motions = _read(storage, "fitted_motions")
     assert list(motions.columns) == SCHEMAS["motions"].names

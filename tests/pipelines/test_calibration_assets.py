@@ -56,6 +56,9 @@ def materialized(tmp_path_factory, body_model):
             and k != dg.AssetKey("method_tables")]  # on request: several full fits (test_association_assets)
     with dg.instance_for_test(temp_dir=str(tmp_path_factory.mktemp("home"))) as instance:
         instance.add_dynamic_partitions(SEQUENCES.name, [PARTITION])
+        # the shared input of the body fit (unpartitioned: its own run)
+        dg.materialize(assets=list(defs.assets), resources=defs.resources, instance=instance,
+                       selection=dg.AssetSelection.assets("motion_prior_checkpoint"))
         result = dg.materialize(assets=list(defs.assets), resources=defs.resources,
                                 selection=dg.AssetSelection.assets(*keys), partition_key=PARTITION, instance=instance,
                                 run_config={"ops": {"body_fit": {"config": QUICK_FIT},

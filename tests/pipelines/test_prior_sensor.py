@@ -34,7 +34,7 @@ def test_a_new_clip_file_requests_one_retraining(tmp_path):
     assert len(changed.run_requests) == 1 and changed.cursor != first.cursor
     request = changed.run_requests[0]
     assert request.partition_key == "motion_prior" and request.run_key == f"mocap-{changed.cursor}"
-    assert {k.to_user_string() for k in request.asset_selection} == {"mocap_clips", "motion_prior_checkpoint",
+    assert {k.to_user_string() for k in request.asset_selection} == {"mocap_clips", "motion_prior_trained",
                                                                      "prior_metrics"}
     assert sensor.job_name == "prior_training"
     job = defs.resolve_job_def("prior_training")
