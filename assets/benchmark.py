@@ -1,37 +1,35 @@
 """Unpartitioned benchmark assets (group ``benchmark_summary``): every sequence's figures beside the paper's, and the
 per-stage timing table.
 
-``benchmark_table`` reads the stored ``metric_tables`` and ``method_tables`` of every registered partition that
-has them materialized (partitions without are skipped with a log line naming them; ``method_tables`` may be missing
-from the definitions altogether), adds the paper's numbers and the peer figures measured here
-(``evaluation/paper_results.py``) and stores the long table (canonical table ``benchmark``) with its side-by-side
-markdown as metadata (``evaluation/benchmark.py``).
+``benchmark_table`` takes the per-sequence ``metric_tables`` and ``method_tables`` as inputs of every registered
+partition (``AllPartitionMapping``; a partition without a stored table is skipped, named in the log), adds the
+paper's numbers and the peer figures measured here (``evaluation/paper_results.py``) and stores the long table
+(canonical table ``benchmark``) with its side-by-side markdown as metadata (``evaluation/benchmark.py``).
 
-It depends on the per-sequence tables it reads (those among the definitions and not computed on request only), so
-``humancal update`` computes it once every registered partition of them is up to date, never from a partial set of
-partitions that could still be brought up to date. Partitions that failed, or that a failed blocking check holds
-back, are left out instead of making it wait for ever: the update passes them with the reason as run config
-(``left_out``), the asset reads none of their tables (a stored one would be out of date) and says which it left out
-and why (log, metadata ``left_out``; ``humancal report --benchmark`` prints it).
+``humancal update`` computes it once every registered partition of ``metric_tables`` is up to date, never from a
+partial set of partitions that could still be brought up to date. ``method_tables`` is computed on request only
+(``humancal benchmark``): the update never waits for it and reads what is stored; a new one makes the benchmark
+stale through its data version like any input. Partitions that failed, or that a failed blocking check holds back,
+are left out instead of making it wait for ever: the update passes them with the reason as run config
+(``left_out``), the asset drops their tables (a stored one would be out of date) and says which it left out and why
+(log, metadata ``left_out``; ``humancal report --benchmark`` prints it).
 ``dagster asset materialize --select benchmark_table`` computes it from whatever is stored.
 """
 
 
 import hashlib
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Sequence
 
 import dagster as dg
 import pandas as pd
-from upath import UPath
 
-from assets.common import ON_REQUEST_KEY, UPDATE_CONDITION, table_metadata, table_output
+from assets.common import UPDATE_CONDITION, table_metadata, table_output
 from assets.partitions import SEQUENCES
 from assets.timings import GROUP, build_stage_timings_asset
 from evaluation.benchmark import benchmark_markdown, benchmark_table, normalise_metrics
 from evaluation.paper_results import PAPER_FILE, PEER_FILE, paper_results, peer_results
-from resources.io_managers import partition_path
 
-__all__ = ["BENCHMARK_INPUTS", "FAN_IN_CONFIG_KEY", "BenchmarkConfig", "build_benchmark_assets", "read_partition_tables"]
+__all__ = ["BENCHMARK_INPUTS", "FAN_IN_CONFIG_KEY", "BenchmarkConfig", "build_benchmark_assets"]
 
 FAN_IN_CONFIG_KEY = "humancal/left_out_config"
 """Asset metadata of a fan-in asset (unpartitioned, reading every partition of a partitioned one) that takes the
@@ -45,21 +43,15 @@ CODE_VERSION = f"1-data-{_DATA_DIGEST}"
 """The code version names the digest of the paper's and the peers' data files: editing them makes it stale."""
 
 
-def read_partition_tables(storage_root: str | UPath, asset: str, partitions: Iterable[str],
-                          log: Callable[[str], None] = lambda message: None) -> tuple[list[pd.DataFrame], list[str]]:
-    """The stored ``metrics`` tables of ``asset`` for ``partitions`` (older ones brought to today's columns) and
-    the partitions read; a partition without a stored file is skipped with a log line."""
-    tables, read, missing = [], [], []
-    for partition in partitions:
-        path = partition_path(storage_root, asset, partition)
-        if not path.exists():
-            missing.append(partition)
-            continue
-        tables.append(normalise_metrics(pd.read_parquet(str(path))))
-        read.append(partition)
-    if missing:
-        log(f"{asset}: no stored table for {', '.join(missing)}: skipped")
-    return tables, read
+def _by_partition(context: dg.AssetExecutionContext, name: str, loaded) -> dict[str, pd.DataFrame]:
+    """An all-partitions input as ``{partition: table}``: the IO manager gives a dict for several partitions, the
+    table itself for one, and nothing where none is stored."""
+    if loaded is None:
+        return {}
+    if isinstance(loaded, pd.DataFrame):
+        (partition,) = context.asset_partition_keys_for_input(name)
+        return {partition: loaded}
+    return dict(loaded)
 
 
 class BenchmarkConfig(dg.Config):
@@ -74,43 +66,41 @@ def left_out_markdown(left_out: dict[str, str]) -> str:
     return "\n".join(f"- {partition}: {reason}" for partition, reason in sorted(left_out.items())) or "none"
 
 
-def build_benchmark_assets(storage_root: str, sequence_assets: Sequence[dg.AssetsDefinition]) -> list[dg.AssetsDefinition]:
+def build_benchmark_assets(sequence_assets: Sequence[dg.AssetsDefinition]) -> list[dg.AssetsDefinition]:
     """``benchmark_table`` and ``stage_timings`` over the per-sequence assets ``sequence_assets``.
 
     Args:
-        storage_root: the artifacts root of the Parquet IO manager (where the per-sequence tables are stored).
         sequence_assets: the per-sequence assets of the definitions: which of :data:`BENCHMARK_INPUTS` exist, and
             what ``stage_timings`` times.
     """
     specs = [spec for assets_def in sequence_assets for spec in assets_def.specs]
-    by_name = {spec.key.to_user_string(): spec for spec in specs}
-    inputs = [name for name in BENCHMARK_INPUTS if name in by_name]
-    # An input computed on request only would make the update wait for it forever: read, not depended on.
-    deps = [name for name in inputs if not (by_name[name].metadata or {}).get(ON_REQUEST_KEY)]
+    present = {spec.key.to_user_string() for spec in specs}
+    inputs = [name for name in BENCHMARK_INPUTS if name in present]
+    ins = {name: dg.AssetIn(key=name, partition_mapping=dg.AllPartitionMapping(),
+                            metadata={"allow_missing_partitions": True}) for name in inputs}
 
-    @dg.asset(name="benchmark_table", group_name=GROUP, deps=deps,
+    @dg.asset(name="benchmark_table", group_name=GROUP, ins=ins,
               metadata={**table_metadata("benchmark"), FAN_IN_CONFIG_KEY: True},
               code_version=CODE_VERSION, automation_condition=UPDATE_CONDITION)
-    def benchmark_table_asset(context: dg.AssetExecutionContext, config: BenchmarkConfig) -> dg.Output:
+    def benchmark_table_asset(context: dg.AssetExecutionContext, config: BenchmarkConfig,
+                              **stored: dict[str, pd.DataFrame]) -> dg.Output:
         """Every sequence's headline figures (``metric_tables`` and ``method_tables`` of every partition that has
         them, but those the update leaves out) beside the paper's numbers and the peers measured here, as one long
         table; the side-by-side markdown is in the metadata (``evaluation/benchmark.py``)."""
         for partition, reason in sorted(config.left_out.items()):
             context.log.warning(f"left out {partition}: {reason}")
-        registered = [p for p in sorted(context.instance.get_dynamic_partitions(SEQUENCES.name))
-                      if p not in config.left_out]
+        registered = sorted(context.instance.get_dynamic_partitions(SEQUENCES.name))
         tables, read = [], {}
         for name in BENCHMARK_INPUTS:
-            if name not in inputs:
+            if name not in stored:
                 context.log.info(f"{name}: not among the definitions' assets: skipped")
                 continue
-            materialized = context.instance.get_materialized_partitions(dg.AssetKey(name))
-            partitions = [p for p in registered if p in materialized]
-            left = [p for p in registered if p not in materialized]
-            if left:
-                context.log.info(f"{name}: not materialized for {', '.join(left)}: skipped")
-            found, read[name] = read_partition_tables(storage_root, name, partitions, context.log.warning)
-            tables += found
+            by_partition = _by_partition(context, name, stored[name])
+            read[name] = [p for p in registered if p in by_partition and p not in config.left_out]
+            missing = [p for p in registered if p not in by_partition and p not in config.left_out]
+            if missing:
+                context.log.info(f"{name}: no stored table for {', '.join(missing)}: skipped")
+            tables += [normalise_metrics(by_partition[p]) for p in read[name]]
         metrics = pd.concat(tables, ignore_index=True) if tables else normalise_metrics(pd.DataFrame(
             columns=["dataset", "sequence", "method", "metric", "value", "unit"]))
         paper = paper_results()

@@ -7,11 +7,12 @@ import dagster as dg
 import pandas as pd
 
 from assets.association import latest_association_seconds
+from assets.baselines import gt_camera_association_seconds
 from assets.bodies import latest_fit_seconds
 from assets.settings import BodyFitSettings
 from assets.checks import latest_check_outcomes
 from assets.common import png_metadata, sequence_asset, table_output
-from evaluation.association_metrics import associate_tables, association_metric_table
+from evaluation.association_metrics import association_metric_table
 from evaluation.body_metrics import PIPELINE_METHOD, pipeline_body_table
 from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
@@ -26,7 +27,7 @@ from resources.datasets import DatasetsResource
 from resources.torch import TorchResource
 
 
-@sequence_asset("metrics", code_version="16")
+@sequence_asset("metrics", code_version="17")
 def metric_tables(
     context: dg.AssetExecutionContext,
     config: BodyFitSettings,
@@ -46,6 +47,8 @@ def metric_tables(
     fitted_motions: pd.DataFrame,
     refined_cameras: pd.DataFrame,
     gt_motions: pd.DataFrame,
+    gt_camera_associations: pd.DataFrame,
+    gt_camera_skeletons3d: pd.DataFrame,
 ) -> dg.Output:
     """MPJPE, PCP and reprojection error of each method; the lifter's 3D and height errors; the camera
     initialisation's focal, position, angle and reprojection errors; detection grouping on real datasets; who is
@@ -83,9 +86,10 @@ def metric_tables(
                                               method=PIPELINE_METHOD[body_fit_regime(spec, config.cameras)],
                                               failed_checks=failed))
         if identified:  # who is who, against the true identities (the association itself never reads them)
-            # the association with the true cameras (evaluation only), once for the association and body rows
+            # the association with the true cameras (evaluation only; asset gt_camera_association)
             dense, lifted = lifted_from_table(detections)
-            with_true_cameras = associate_tables(dense, lifted, gt, spec.sequence)
+            with_true_cameras = (gt_camera_associations, gt_camera_skeletons3d,
+                                 gt_camera_association_seconds(context.instance, context.partition_key))
             parts.append(association_metric_table(
                 spec, associations=associations, skeletons3d=skeletons3d,
                 seconds=latest_association_seconds(context.instance, context.partition_key),

@@ -205,7 +205,7 @@ def cmd_ui(args) -> int:
     repo = Path(__file__).resolve().parent.parent
     # The Dagster of this interpreter's environment, whether or not that environment is activated (a bare
     # `dagster` would be looked up on PATH, and may be missing or another installation).
-    argv = [sys.executable, "-m", "dagster", "dev", "-m", "pipelines.definitions", "-h", "127.0.0.1", "-p", str(args.port)]
+    argv = [sys.executable, "-m", "dagster", "dev", "-w", "workspace.yaml", "-h", "127.0.0.1", "-p", str(args.port)]
     # A process started in the background by a non-interactive shell inherits SIGINT as ignored, and
     # dagster maps SIGTERM onto its SIGINT handler: restore the defaults so Ctrl-C and `kill` stop it.
     signal.signal(signal.SIGINT, signal.SIG_DFL)

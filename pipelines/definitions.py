@@ -5,7 +5,7 @@ from __future__ import annotations
 import dagster as dg
 
 from assets.association import association
-from assets.baselines import gt_camera_triangulation
+from assets.baselines import gt_camera_association, gt_camera_triangulation
 from assets.benchmark import build_benchmark_assets
 from assets.bodies import body_fit
 from assets.calibration import detections, extrinsics, intrinsics
@@ -27,8 +27,8 @@ from resources.datasets import DatasetsResource
 from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFactory
 from resources.torch import TorchResource
 
-PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, detections, intrinsics, extrinsics, association,
-                       body_fit, final_cameras, metric_tables, method_tables]
+PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, gt_camera_association, detections, intrinsics,
+                       extrinsics, association, body_fit, final_cameras, metric_tables, method_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
 SHARED_ASSETS = [sequence_registry, mocap_clips]
@@ -69,7 +69,7 @@ def build_definitions(
     return dg.Definitions(
         # benchmark_table, stage_timings (group benchmark_summary): unpartitioned, read every partition's tables
         assets=[*SHARED_ASSETS, *lifter_assets, *prior_assets, *PER_SEQUENCE_ASSETS,
-                *build_benchmark_assets(root, PER_SEQUENCE_ASSETS)],
+                *build_benchmark_assets(PER_SEQUENCE_ASSETS)],
         jobs=[
             dg.define_asset_job("sequence_job", selection=dg.AssetSelection.groups("sequence"),
                                 description="Every per-sequence asset of one partition."),

@@ -20,7 +20,10 @@ class UpdateGraph:
     def __init__(self, defs: dg.Definitions):
         self.defs = defs
         self.specs = {spec.key: spec for spec in defs.resolve_all_asset_specs()}
-        self.parents = {key: [d.asset_key for d in spec.deps if d.asset_key in self.specs]
+        # A fan-in reads the partitions of an input computed on request only (method_tables for benchmark_table)
+        # as stored: the update never waits for it; its new data still makes the fan-in stale (Dagster's lineage).
+        self.parents = {key: [d.asset_key for d in spec.deps if d.asset_key in self.specs
+                              and not (self._fan_in(spec) and self.on_request(d.asset_key))]
                         for key, spec in self.specs.items()}
         self.children: dict[dg.AssetKey, list[dg.AssetKey]] = defaultdict(list)
         graph = defs.resolve_asset_graph()
@@ -33,6 +36,10 @@ class UpdateGraph:
                 self.children[parent].append(key)
         self._steps: dict[dg.AssetKey, tuple[dg.AssetKey, ...]] = {}
 
+    @staticmethod
+    def _fan_in(spec: dg.AssetSpec) -> bool:
+        return bool((spec.metadata or {}).get(FAN_IN_CONFIG_KEY))
+
     def partitioned(self, key: dg.AssetKey) -> bool:
         return self.specs[key].partitions_def is not None
 
@@ -41,7 +48,7 @@ class UpdateGraph:
 
     def takes_left_out(self, key: dg.AssetKey) -> bool:
         """Whether the fan-in asset ``key`` takes the partitions to leave out as run config."""
-        return bool((self.specs[key].metadata or {}).get(FAN_IN_CONFIG_KEY))
+        return self._fan_in(self.specs[key])
 
     def code_version(self, key: dg.AssetKey) -> str | None:
         return self.specs[key].code_version

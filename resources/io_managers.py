@@ -24,7 +24,6 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import torch
-from dagster._core.storage.upath_io_manager import UPathIOManager
 from upath import UPath
 
 from humancal.lifter import checkpoint_digest
@@ -40,6 +39,11 @@ the data version so that ``humancal update`` rehashes an artifact only when the 
 
 class ArtifactError(RuntimeError):
     """A stored artifact cannot be written or read; the message names the file and what to do."""
+
+
+class MissingArtifactError(ArtifactError, FileNotFoundError):
+    """An artifact that was never written (or was deleted): a ``FileNotFoundError`` too, so that an input declared
+    with ``allow_missing_partitions`` (the benchmark's fan-in) skips the partition."""
 
 
 def partition_path(root: str | UPath, asset_key: str, partition_key: str | None, extension: str = ".parquet") -> UPath:
@@ -170,7 +174,7 @@ def _record_signature(context: dg.OutputContext, path: UPath) -> None:
         context.add_output_metadata({STORED_FILE_KEY: dg.MetadataValue.text(signature)})
 
 
-class _AtomicUPathIOManager(UPathIOManager):
+class _AtomicUPathIOManager(dg.UPathIOManager):
     def make_directory(self, path: UPath) -> None:
         _make_dir(path)
 
@@ -199,7 +203,8 @@ class ParquetTableIOManager(_AtomicUPathIOManager):
             with path.open("rb") as f:
                 table = pq.read_table(f)
         except FileNotFoundError:
-            raise ArtifactError(f"{path} does not exist: materialize {context.asset_key.to_user_string()} first") from None
+            raise MissingArtifactError(f"{path} does not exist: materialize {context.asset_key.to_user_string()} "
+                                       "first") from None
         except (pa.ArrowInvalid, OSError) as err:
             raise ArtifactError(
                 f"{path} is not a readable Parquet file ({err}); delete it and materialize "
@@ -232,7 +237,8 @@ class CheckpointIOManager(_AtomicUPathIOManager):
             with path.open("rb") as f:
                 return torch.load(io.BytesIO(f.read()), weights_only=True, map_location="cpu")
         except FileNotFoundError:
-            raise ArtifactError(f"{path} does not exist: materialize {context.asset_key.to_user_string()} first") from None
+            raise MissingArtifactError(f"{path} does not exist: materialize {context.asset_key.to_user_string()} "
+                                       "first") from None
         except Exception as err:  # torch raises several unrelated types for a damaged file
             first_line = str(err).splitlines()[0] if str(err) else type(err).__name__
             raise ArtifactError(f"{path} is not a readable checkpoint ({first_line}); delete it and materialize again") from None

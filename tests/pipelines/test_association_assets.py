@@ -19,7 +19,8 @@ from tests.pipelines.test_calibration_assets import SCENE, _stand_in_table
 
 PARTITION = "synthetic__calib"
 ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people", "gt_motions",
-          "gt_camera_triangulation", "associations", "skeletons3d", "fitted_motions", "refined_cameras", "metric_tables",
+          "gt_camera_triangulation", "gt_camera_associations", "gt_camera_skeletons3d", "associations", "skeletons3d",
+          "fitted_motions", "refined_cameras", "metric_tables",
           "method_tables"]
 FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10, "iterations_cameras": 5}
 METHODS = ["separate", "int_ext_no_bundle", "no_prior"]

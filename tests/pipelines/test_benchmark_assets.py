@@ -29,7 +29,9 @@ def test_benchmark_table_reads_the_stored_partitions_and_skips_the_others(tmp_pa
     defs = build_definitions(storage, datasets=DatasetsResource(data_dir=str(tmp_path / "no_data")))
     graph = defs.resolve_asset_graph()
     benchmark = graph.get(dg.AssetKey("benchmark_table"))
-    assert benchmark.partitions_def is None and dg.AssetKey("metric_tables") in benchmark.parent_keys
+    # every partition of its inputs through the graph (lineage), the on-request method_tables too
+    assert benchmark.partitions_def is None and {"metric_tables", "method_tables"} == {
+        key.to_user_string() for key in benchmark.parent_keys}
     assert all(not graph.get(k).partitions_def for k in graph.materializable_asset_keys
                if graph.get(k).group_name == benchmark.group_name)  # a group selection never mixes partitionings
     instance = dg.DagsterInstance.ephemeral()
@@ -51,7 +53,7 @@ def test_benchmark_table_reads_the_stored_partitions_and_skips_the_others(tmp_pa
     recorded = events["benchmark_table"].tags["dagster/data_version"]
     assert stored_content_version(partition_path(storage, "benchmark_table", None), "table", "benchmark") == recorded
     logs = " ".join(e.user_message for e in instance.all_logs(result.run_id) if e.user_message)
-    assert f"metric_tables: not materialized for {MISSING}: skipped" in logs
+    assert f"metric_tables: no stored table for {MISSING}: skipped" in logs
 
     timings = pd.read_parquet(str(partition_path(storage, "stage_timings", None)))
     assert set(timings["sequence"]) == {STORED}  # the runless materialization has no step: no seconds

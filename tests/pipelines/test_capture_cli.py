@@ -446,7 +446,6 @@ def test_openpose_capture_reads_back_the_synthetic_detections(tmp_path, state, b
 
 def _calibrate_and_compare(key: str, add_args: list[str], tmp_path: Path, monkeypatch, capsys):
     import pipelines.definitions
-    from evaluation.camera_metrics import camera_errors
     from humancal.formats import read_cameras
 
     # the Definitions' storage root follows the state dir set by the test

@@ -1,5 +1,6 @@
 """The `humancal` CLI: argument handling, reports, and the UI's signal handling."""
 
+import json
 import os
 import signal
 import socket
@@ -92,7 +93,7 @@ def test_ui_runs_the_dagster_of_its_own_interpreter(tmp_path, monkeypatch):
     monkeypatch.setattr(signal, "signal", lambda *a: None)
     main(["ui", "--port", "3999"])
     (file, argv, env), = calls
-    assert file == sys.executable and argv[:4] == [sys.executable, "-m", "dagster", "dev"]
+    assert file == sys.executable and argv[:6] == [sys.executable, "-m", "dagster", "dev", "-w", "workspace.yaml"]
     assert argv[-2:] == ["-p", "3999"] and env["DAGSTER_HOME"] == str(tmp_path / "dagster_home")
 
 
@@ -114,6 +115,14 @@ def test_ui_starts_and_stops_on_sigterm(tmp_path):
             except OSError:
                 assert proc.poll() is None and time.time() < deadline, "dagster dev did not come up"
                 time.sleep(1)
+        # the graph it serves, from workspace.yaml: the body fit reads the motion prior through the graph
+        query = '{ assetNodeOrError(assetKey: {path: ["fitted_motions"]}) { ... on AssetNode { dependencyKeys { path } } } }'
+        request = urllib.request.Request(f"http://127.0.0.1:{port}/graphql", data=json.dumps({"query": query}).encode(),
+                                         headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(request, timeout=60) as r:
+            node = json.load(r)["data"]["assetNodeOrError"]
+        parents = {"/".join(key["path"]) for key in node["dependencyKeys"]}
+        assert parents == {"detections", "associations", "skeletons3d", "extrinsics", "motion_prior_checkpoint"}
         proc.send_signal(signal.SIGTERM)
         proc.wait(timeout=30)
         deadline = time.time() + 20
