@@ -268,6 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_remove)
     from pipelines.benchmark_command import add_parser as add_benchmark_command  # humancal benchmark --partition P
     add_benchmark_command(sub, cmd_update, _instance, QUIET_RUN_CONFIG)
+    from pipelines.view_command import add_parser as add_view_command  # humancal view --partition P [--save F]
+    add_view_command(sub)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
     p.add_argument("--port", type=int, default=3000)
     p.set_defaults(func=cmd_ui)

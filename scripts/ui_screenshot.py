@@ -78,7 +78,7 @@ def main() -> None:
         raise SystemExit("ui_screenshot: no chromium on PATH (Debian: apt-get install chromium)")
     width, height = (int(v) for v in args.size.lower().split("x"))
     with tempfile.TemporaryDirectory() as profile:
-        proc = subprocess.Popen([browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+        proc = subprocess.Popen([browser, "--headless", "--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--hide-scrollbars",
                                  f"--window-size={width},{height}", f"--remote-debugging-port={args.port}",
                                  f"--user-data-dir={profile}", "about:blank"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -166,3 +166,12 @@ def test_export_cameras_roundtrips_through_a_tool_format(tmp_path, monkeypatch, 
               "--ground-truth", "--cameras-asset", "extrinsics"])
     with pytest.raises(SystemExit, match="is not stored"):
         main(["export", "detections", "--partition", "d__s", "--format", "openpose", "--out", str(tmp_path / "op")])
+
+
+def test_view_refuses_a_wrong_file_and_a_partition_never_computed(tmp_path, monkeypatch):
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    with pytest.raises(SystemExit, match=r"a Rerun recording file ends in \.rrd"):
+        main(["view", "--partition", "synthetic__demo", "--save", str(tmp_path / "demo.txt")])
+    with pytest.raises(SystemExit, match=r"views of synthetic__nothing is not stored .*humancal update --partition"):
+        main(["view", "--partition", "synthetic__nothing", "--save", str(tmp_path / "demo.rrd")])
+    assert not (tmp_path / "demo.rrd").exists()

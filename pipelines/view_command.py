@@ -1,0 +1,130 @@
+"""``humancal view``: the stored result of one partition as a Rerun recording (``humancal.viewing``).
+
+With ``--save FILE.rrd`` the recording is written (open it with ``rerun FILE.rrd``, or drop it on
+https://rerun.io/viewer); without, it is shown: in Rerun's native viewer when there is a display, else in its web
+viewer served on 127.0.0.1 until Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+from pipelines.export_command import check_out, stored_table
+
+CAMERA_KINDS = {"final": "final_cameras", "calibrated": "extrinsics", "refined": "refined_cameras",
+                "reference": "gt_cameras"}
+"""Camera kind shown -> the stored table it comes from."""
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("view", help="look at a partition's cameras, people and meshes in 3D (Rerun)")
+    p.add_argument("--partition", required=True, help="e.g. synthetic__demo")
+    p.add_argument("--save", default=None, metavar="FILE.rrd", help="write the recording instead of showing it")
+    p.add_argument("--full-mesh", action="store_true", help="anny's full meshes (default: decimated, lighter)")
+    p.add_argument("--no-mesh", action="store_true", help="no body meshes (the skeletons only; fastest)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --save file")
+    p.add_argument("--port", type=int, default=9090, help="web viewer port when there is no display")
+    p.set_defaults(func=cmd_view)
+
+
+def _optional(asset: str, partition: str):
+    """The stored table, or None when it is not stored."""
+    try:
+        return stored_table(asset, partition)
+    except SystemExit:
+        return None
+
+
+def capture_view(partition: str, *, meshes: bool = True):
+    """The :class:`humancal.viewing.CaptureView` of a partition's stored tables."""
+    from humancal.camera import cameras_from_table
+    from humancal.fitting import FittedMotions
+    from humancal.viewing import CaptureView
+    from pipelines.motions_export import _sequence_fps
+
+    views = stored_table("views", partition)
+    cameras = {}
+    for kind, asset in CAMERA_KINDS.items():
+        table = _optional(asset, partition)
+        if table is not None and len(table):
+            cameras[kind] = cameras_from_table(table)
+    if "final" not in cameras:
+        raise SystemExit(f"humancal: {partition} has no cameras stored yet; run `humancal update --partition {partition}`")
+    fps = _sequence_fps(partition)[0]
+    fitted = _optional("fitted_motions", partition)
+    keypoints, vertices, faces = {}, {}, None
+    if fitted is not None and len(fitted):
+        motions = FittedMotions.from_table(fitted, fps)
+        for index, person_id in enumerate(motions.person_ids):
+            present = motions.present[index]
+            keypoints[int(person_id)] = (motions.frames[present], motions.keypoints_world_m[index, present])
+        if meshes:
+            vertices, faces = _meshes(motions)
+    return CaptureView(partition, views["name"].tolist(), cameras, fps, _optional("skeletons3d", partition),
+                       _optional("raw_detections", partition), _optional("associations", partition), keypoints,
+                       vertices, faces)
+
+
+def _meshes(motions, chunk: int = 64):
+    """person id -> ((T,) frames, (T, V, 3) anny vertices), and the faces."""
+    import numpy as np
+    import torch
+
+    from humancal.body import BodyModel
+    from pipelines.quiet_warp import init_warp_quietly
+
+    init_warp_quietly()
+    body = BodyModel()
+    out = {}
+    for index, person_id in enumerate(motions.person_ids):
+        present = np.flatnonzero(motions.present[index])
+        phenotypes = torch.as_tensor(motions.phenotypes[index : index + 1], dtype=body.dtype)
+        parts = []
+        for start in range(0, len(present), chunk):
+            frames = present[start : start + chunk]
+            with torch.no_grad():
+                parts.append(body.reference_forward(
+                    phenotypes, torch.as_tensor(motions.bone_rotmats_local[index, frames][None], dtype=body.dtype),
+                    torch.as_tensor(motions.root_translation_m[index, frames][None], dtype=body.dtype),
+                )["vertices"][0].cpu().float().numpy())
+        out[int(person_id)] = (motions.frames[present], np.concatenate(parts) if parts else np.zeros((0, 0, 3)))
+    return out, body.faces.cpu().numpy()
+
+
+def cmd_view(args) -> int:
+    import rerun as rr
+
+    from humancal.viewing import blueprint, record_capture
+
+    start = time.perf_counter()
+    save = None if args.save is None else check_out(args.save, args.overwrite)
+    if save is not None and save.suffix != ".rrd":
+        raise SystemExit(f"humancal: --save {save}: a Rerun recording file ends in .rrd")
+    view = capture_view(args.partition, meshes=not args.no_mesh)
+    recording = rr.RecordingStream("humancal", recording_id=args.partition)
+    layout = blueprint(view.view_names)
+    partial = None
+    if save is not None:
+        partial = save.with_name(save.name + ".partial")
+        recording.save(str(partial), default_blueprint=layout)
+    elif os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        recording.spawn(default_blueprint=layout)
+    else:
+        url = recording.serve_grpc(default_blueprint=layout)
+        rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=url)
+        print(f"web viewer: http://127.0.0.1:{args.port}/?url={url} (Ctrl-C stops it)", flush=True)
+    summary = record_capture(view, recording, full_mesh=args.full_mesh, progress=lambda line: print(line, flush=True))
+    recording.flush()
+    if save is not None:
+        recording.disconnect()
+        partial.replace(save)
+        size_mb = save.stat().st_size / 1e6
+        print(f"wrote {save} ({size_mb:.1f} MB, {len(summary.entities)} entities, "
+              f"{time.perf_counter() - start:.1f} s); open it with `rerun {save}`")
+        return 0
+    try:
+        while True:
+            time.sleep(1.0)
+    except KeyboardInterrupt:
+        return 0

@@ -1,0 +1,115 @@
+"""The Rerun recording of a synthetic capture, read back with Rerun's own tool (``rerun rrd print``): every camera,
+person, mesh and view is there, and the fit's reprojection error is the detections' noise when the fit is the
+truth."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from collections import Counter
+
+import numpy as np
+import pytest
+import rerun as rr
+import torch
+
+from humancal.camera import cameras_from_table
+from humancal.fitting import FittedMotions
+from humancal.synthetic import generate_scene, preset
+from humancal.viewing import CaptureView, decimation, record_capture
+
+_CHUNK = re.compile(r"^Chunk\(\S+\) with (\d+) rows .* - (\S+) - data columns: \[(.*)\]$")
+
+
+def _entities(path) -> dict[str, tuple[int, set[str]]]:
+    """entity path -> (rows, archetype:field columns) of an .rrd file, as ``rerun rrd print`` lists its chunks."""
+    printed = subprocess.run([sys.executable, "-m", "rerun", "rrd", "print", str(path)], capture_output=True,
+                             text=True, timeout=120, check=True).stdout
+    rows, columns = Counter(), {}
+    for line in printed.splitlines():
+        match = _CHUNK.match(line.strip())
+        if match:
+            count, entity, fields = match.groups()
+            rows[entity] += int(count)
+            columns.setdefault(entity, set()).update(fields.split())
+    return {entity: (rows[entity], columns[entity]) for entity in rows}
+
+
+@pytest.fixture(scope="module")
+def recorded(body_model, tmp_path_factory):
+    scene = generate_scene(preset("tiny", num_frames=12, num_people=2, num_views=3, seed=3), body_model, sequence="v")
+    cameras = cameras_from_table(scene.cameras)
+    motions = FittedMotions.from_table(scene.motions, scene.config.fps)
+    keypoints, meshes = {}, {}
+    for index, person_id in enumerate(motions.person_ids):
+        present = motions.present[index]
+        keypoints[int(person_id)] = (motions.frames[present], motions.keypoints_world_m[index, present])
+        with torch.no_grad():
+            vertices = body_model.reference_forward(
+                torch.as_tensor(motions.phenotypes[index : index + 1], dtype=body_model.dtype),
+                torch.as_tensor(motions.bone_rotmats_local[index, present][None], dtype=body_model.dtype),
+                torch.as_tensor(motions.root_translation_m[index, present][None], dtype=body_model.dtype),
+            )["vertices"][0].numpy()
+        meshes[int(person_id)] = (motions.frames[present], vertices)
+    names = [f"cam{v}" for v in range(len(cameras))]
+    view = CaptureView("synthetic__v", names, {"final": cameras, "reference": cameras}, scene.config.fps,
+                       scene.poses3d, scene.detections, scene.associations, keypoints, meshes,
+                       body_model.faces.numpy())
+    path = tmp_path_factory.mktemp("rrd") / "capture.rrd"
+    recording = rr.RecordingStream("humancal_test", recording_id="synthetic__v")
+    recording.save(str(path))
+    summary = record_capture(view, recording)
+    recording.flush()
+    recording.disconnect()
+    return scene, names, summary, path
+
+
+def test_every_camera_person_mesh_and_view_is_in_the_file(recorded):
+    scene, names, summary, path = recorded
+    entities = _entities(path)
+    people = sorted(scene.poses3d["person_id"].unique())
+    frames = scene.poses3d["frame"].nunique()
+    for kind in ("final", "reference"):
+        for name in names:
+            assert {"Pinhole:image_from_camera", "Pinhole:resolution"} <= entities[f"/world/cameras/{kind}/{name}"][1]
+    for person_id in people:
+        rows, columns = entities[f"/world/people/{person_id}/skeleton"]
+        assert rows == frames and {"LineStrips3D:strips", "Points3D:positions"} <= columns
+        rows, columns = entities[f"/world/people/{person_id}/body"]
+        assert rows == frames and "Mesh3D:vertex_positions" in columns
+        assert f"/world/people/{person_id}/path" in entities
+    for name in names:
+        assert entities[f"/world/cameras/final/{name}/detections"][0] == frames
+        assert entities[f"/world/cameras/final/{name}/fit"][0] == frames
+        assert "Scalars:scalars" in entities[f"/errors/{name}"][1]
+    assert summary.entities["world/floor"] == 1 and summary.frames == frames
+
+
+def test_the_fit_of_the_truth_sits_on_the_detections(recorded):
+    """The error plot's figure: the true keypoints reprojected are the detections' noise away (a few px)."""
+    scene, names, summary, path = recorded
+    from humancal.viewing.recording import _reprojection
+
+    motions = FittedMotions.from_table(scene.motions, scene.config.fps)
+    keypoints = {int(p): (motions.frames[motions.present[i]], motions.keypoints_world_m[i, motions.present[i]])
+                 for i, p in enumerate(motions.person_ids)}
+    cameras = cameras_from_table(scene.cameras)
+    view = CaptureView("v", names, {"final": cameras}, 30.0, keypoints_world_m=keypoints)
+    person = {(int(f), int(v), int(d)): int(p) for f, v, d, p in scene.associations[
+        ["frame", "view", "det_id", "person_id"]].itertuples(index=False)}
+    errors = [e for frame, (_, _, e) in _reprojection(view, 0, cameras[0], scene.detections[scene.detections["view"] == 0],
+                                                       person).items()]
+    assert np.isfinite(errors).all() and 0.0 < np.median(errors) < 10.0
+
+
+def test_decimation_keeps_a_closed_lighter_mesh():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.3)
+    keep, faces = decimation(sphere.vertices, sphere.faces, cell_m=0.05)
+    assert len(keep) < 0.5 * len(sphere.vertices) and faces.max() < len(keep) and len(faces) > 100
+    light = trimesh.Trimesh(sphere.vertices[keep], faces, process=False)
+    assert abs(light.volume - sphere.volume) / sphere.volume < 0.1  # the same body, fewer triangles, outward
+    with pytest.raises(ValueError, match="cell_m"):
+        decimation(sphere.vertices, sphere.faces, cell_m=0.0)
