@@ -17,6 +17,7 @@ import hashlib
 import io
 import os
 import uuid
+from collections.abc import Callable
 from typing import Any, Literal
 
 import dagster as dg
@@ -44,6 +45,19 @@ class ArtifactError(RuntimeError):
 class MissingArtifactError(ArtifactError, FileNotFoundError):
     """An artifact that was never written (or was deleted): a ``FileNotFoundError`` too, so that an input declared
     with ``allow_missing_partitions`` (the benchmark's fan-in) skips the partition."""
+
+
+def read_checkpoint_file(path: str | UPath, unreadable: Callable[[str], Exception]) -> dict:
+    """A checkpoint dict written by :class:`CheckpointIOManager` (``torch.load``, ``weights_only``).
+
+    Raises:
+        Exception: ``unreadable(why)`` (why: the first line of torch's error) for a missing or damaged file.
+    """
+    try:
+        with UPath(path).open("rb") as f:
+            return torch.load(io.BytesIO(f.read()), weights_only=True, map_location="cpu")
+    except Exception as err:  # torch raises several unrelated types for a damaged file
+        raise unreadable(str(err).splitlines()[0] if str(err) else type(err).__name__) from None
 
 
 def partition_path(root: str | UPath, asset_key: str, partition_key: str | None, extension: str = ".parquet") -> UPath:

@@ -9,17 +9,15 @@ trained checkpoint and returns to the shipped weights. Every run states which on
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-import torch
 from upath import UPath
 
 from humancal.lifter import checkpoint_digest, read_lifter_weights, shipped_info
 from humancal.lifter.weights import SHIPPED_LIFTER_STEM, LifterWeightsError
-from resources.io_managers import partition_path
+from resources.io_managers import partition_path, read_checkpoint_file
 
 __all__ = ["ActiveLifter", "active_lifter", "trained_lifter_path"]
 
@@ -63,14 +61,9 @@ class ActiveLifter:
 
 
 def _load_trained(path: Path | UPath) -> dict[str, Any]:
-    try:
-        with UPath(path).open("rb") as f:
-            return torch.load(io.BytesIO(f.read()), weights_only=True, map_location="cpu")
-    except Exception as err:  # torch raises several unrelated types for a damaged file
-        raise LifterWeightsError(
-            f"{path}: the trained lifter is not a readable checkpoint ({str(err).splitlines()[0] if str(err) else type(err).__name__}); "
-            "run `humancal train lifter` again, or `humancal train lifter --discard` to use the shipped weights"
-        ) from None
+    return read_checkpoint_file(path, lambda why: LifterWeightsError(
+        f"{path}: the trained lifter is not a readable checkpoint ({why}); run `humancal train lifter` again, or "
+        "`humancal train lifter --discard` to use the shipped weights"))
 
 
 def active_lifter(storage_root: str | UPath) -> ActiveLifter:

@@ -9,17 +9,15 @@ makes that asset stale, and through its data version every fitted motion.
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-import torch
 from upath import UPath
 
 from humancal.prior import read_prior_info, shipped_prior
 from humancal.prior.weights import SHIPPED_VARIANT_STEMS, PriorWeightsError
-from resources.io_managers import checkpoint_content_version, partition_path
+from resources.io_managers import checkpoint_content_version, partition_path, read_checkpoint_file
 
 __all__ = ["ActivePrior", "active_prior", "shipped_active_prior", "trained_prior_path", "TRAINED_PRIOR_ASSET", "FIT_VARIANT"]
 
@@ -72,15 +70,9 @@ class ActivePrior:
 
 
 def _load_trained(path: Path | UPath) -> dict[str, Any]:
-    try:
-        with UPath(path).open("rb") as f:
-            return torch.load(io.BytesIO(f.read()), weights_only=True, map_location="cpu")
-    except Exception as err:  # torch raises several unrelated types for a damaged file
-        first = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise PriorWeightsError(
-            f"{path}: the trained motion prior is not a readable checkpoint ({first}); run `humancal train prior` "
-            "again, or delete the file to use the shipped weights"
-        ) from None
+    return read_checkpoint_file(path, lambda why: PriorWeightsError(
+        f"{path}: the trained motion prior is not a readable checkpoint ({why}); run `humancal train prior` again, "
+        "or delete the file to use the shipped weights"))
 
 
 def active_prior(storage_root: str | UPath) -> ActivePrior:
