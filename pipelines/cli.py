@@ -283,14 +283,15 @@ def _add_export_parser(sub) -> None:
     from pipelines.format_names import CAMERA_FORMATS, MOTION_FORMATS
 
     p = sub.add_parser("export", help="write stored detections, cameras or fitted motions in another tool's format")
-    p.add_argument("what", choices=("detections", "cameras", "motions"))
+    p.add_argument("what", choices=("detections", "cameras", "motions", "overlays"))
     p.add_argument("--partition", required=True)
     p.add_argument("--format", required=True,
                    help=f"openpose (detections); {', '.join(CAMERA_FORMATS)} (cameras); {', '.join(MOTION_FORMATS)} "
-                        "(motions; see docs/formats.md)")
+                        "(motions; see docs/formats.md); mp4 (overlays: one video per view and a contact sheet)")
     p.add_argument("--out", required=True, help="output folder (detections, motions, easymocap, colmap) or file")
     p.add_argument("--frames", default=None,
-                   help="motions, obj only: START:STOP[:STEP] sequence frame numbers to write (STOP excluded)")
+                   help="motions (obj only) and overlays: START:STOP[:STEP] sequence frame numbers to write "
+                        "(STOP excluded)")
     p.add_argument("--fps", type=float, default=None,
                    help="motions: frame rate of the sequence (default: the dataset's, else 30)")
     p.add_argument("--cameras-asset", default=None,

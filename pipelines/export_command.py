@@ -76,6 +76,10 @@ def cmd_export(args) -> int:
 
 
 def _export(args) -> int:
+    if args.what == "overlays":
+        from pipelines.view_command import export_overlays
+
+        return export_overlays(args)
     if args.what == "motions":
         from pipelines.format_names import MOTION_FORMATS
         from pipelines.motions_export import export_stored_motions

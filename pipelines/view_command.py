@@ -92,6 +92,34 @@ def _meshes(motions, chunk: int = 64):
     return out, body.faces.cpu().numpy()
 
 
+def export_overlays(args) -> int:
+    """``humancal export overlays``: one MP4 per view and a contact sheet (``humancal.viewing.overlays``)."""
+    import numpy as np
+
+    from humancal.viewing.overlays import write_overlays
+    from pipelines.motions_export import _frame_slice
+
+    if args.format != "mp4":
+        raise SystemExit("humancal: overlays export supports --format mp4")
+    out = check_out(args.out, args.overwrite)
+    view = capture_view(args.partition, meshes=False)
+    frames = None
+    selection = _frame_slice(args.frames)
+    if selection is not None and view.detections is not None:
+        numbers = np.asarray(sorted(view.detections["frame"].unique()))
+        start = numbers[0] if selection.start is None else selection.start
+        stop = numbers[-1] + 1 if selection.stop is None else selection.stop
+        frames = numbers[(numbers >= start) & (numbers < stop) & ((numbers - start) % (selection.step or 1) == 0)]
+        if len(frames) == 0:
+            raise SystemExit(f"humancal: --frames {args.frames} selects none of {args.partition}'s frames "
+                             f"({numbers[0]}-{numbers[-1]})")
+    start = time.perf_counter()
+    result = write_overlays(view, out, frames=frames, progress=lambda line: print(line, flush=True))
+    print(f"wrote {len(result.videos)} videos of {len(result.frames)} frames and {result.contact_sheet} "
+          f"({time.perf_counter() - start:.1f} s)")
+    return 0
+
+
 def cmd_view(args) -> int:
     import rerun as rr
 
@@ -114,8 +142,15 @@ def cmd_view(args) -> int:
         url = recording.serve_grpc(default_blueprint=layout)
         rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=url)
         print(f"web viewer: http://127.0.0.1:{args.port}/?url={url} (Ctrl-C stops it)", flush=True)
-    summary = record_capture(view, recording, full_mesh=args.full_mesh, progress=lambda line: print(line, flush=True))
-    recording.flush()
+    try:
+        summary = record_capture(view, recording, full_mesh=args.full_mesh,
+                                 progress=lambda line: print(line, flush=True))
+        recording.flush()
+    except BaseException:
+        if partial is not None:  # nothing half-written is left behind
+            recording.disconnect()
+            partial.unlink(missing_ok=True)
+        raise
     if save is not None:
         recording.disconnect()
         partial.replace(save)

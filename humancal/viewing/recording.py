@@ -24,9 +24,10 @@ import numpy as np
 import pandas as pd
 import rerun as rr
 
-from humancal.camera import Camera, project_points
+from humancal.camera import Camera
 from humancal.keypoints import JOINT_INDEX, LIMB_INDEX, NUM_JOINTS
 from humancal.viewing.mesh import decimation
+from humancal.viewing.reprojection import detection_people, joint_index, reprojected_fit
 
 
 __all__ = ["CaptureView", "RecordingSummary", "record_capture", "person_colour", "CAMERA_COLOURS", "blueprint"]
@@ -39,11 +40,6 @@ _PALETTE = np.array([(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40
                      (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)], dtype=np.uint8)
 _REJECTED = (150, 150, 150)
 _HIPS = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
-
-
-def _joint_index(joints: pd.Series) -> np.ndarray:
-    """(N,) canonical joint indices of a table's ``joint`` column (names, as the tables store them)."""
-    return joints.map(JOINT_INDEX).to_numpy(dtype=np.int64)
 
 
 def person_colour(person_id: int) -> tuple[int, int, int]:
@@ -173,7 +169,7 @@ def _log_skeletons(log, at, skeletons: pd.DataFrame) -> None:
         hips = []
         for frame, rows in person.groupby("frame"):
             joints = np.full((NUM_JOINTS, 3), np.nan)
-            joints[_joint_index(rows["joint"])] = rows[["x_m", "y_m", "z_m"]].to_numpy()
+            joints[joint_index(rows["joint"])] = rows[["x_m", "y_m", "z_m"]].to_numpy()
             at(frame)
             bones = [joints[[a, b]] for a, b in LIMB_INDEX if np.isfinite(joints[[a, b]]).all()]
             seen = np.isfinite(joints).all(1)
@@ -199,10 +195,7 @@ def _log_meshes(log, at, view: CaptureView, full_mesh: bool, cell_m: float) -> N
 
 def _log_views(log, at, view: CaptureView) -> None:
     detections = view.detections
-    person = {}
-    if view.associations is not None and len(view.associations):
-        person = {(int(f), int(v), int(d)): int(p) for f, v, d, p in view.associations[
-            ["frame", "view", "det_id", "person_id"]].itertuples(index=False)}
+    person = detection_people(view.associations)
     cameras = view.cameras["final"]
     for v, name in enumerate(view.view_names):
         base = f"world/cameras/final/{name}"
@@ -217,41 +210,11 @@ def _log_views(log, at, view: CaptureView) -> None:
                 colours += [person_colour(pid) if pid >= 0 else _REJECTED] * int(ok.sum())
             if points:
                 log(f"{base}/detections", rr.Points2D(np.concatenate(points), colors=colours, radii=3.0))
-        errors = _reprojection(view, v, cameras[v], mine, person)
-        for frame, (fitted, colours, error_px) in errors.items():
+        for frame, fit in reprojected_fit(view.keypoints_world_m, v, cameras[v], mine, person).items():
             at(frame)
-            log(f"{base}/fit", rr.Points2D(fitted, colors=colours, radii=2.0))
-            if np.isfinite(error_px):
-                log(f"errors/{name}", rr.Scalars(error_px))
-
-
-def _reprojection(view: CaptureView, v: int, camera: Camera, detections: pd.DataFrame, person: dict):
-    """frame -> (reprojected fitted keypoints (N, 2), their colours, the mean pixel error against the associated
-    detections of this view)."""
-    out = {}
-    by_frame = {int(f): rows for f, rows in detections.groupby("frame")}
-    per_frame: dict[int, list] = {}
-    for person_id, (frames, keypoints) in view.keypoints_world_m.items():
-        pixels, depth = project_points(camera, keypoints.reshape(-1, 3))
-        pixels = pixels.reshape(len(frames), NUM_JOINTS, 2)
-        in_front = (depth.reshape(len(frames), NUM_JOINTS) > 0)
-        for frame, px, ok in zip(frames, pixels, in_front):
-            per_frame.setdefault(int(frame), []).append((person_id, px, ok))
-    for frame, people in per_frame.items():
-        rows = by_frame.get(frame)
-        fitted, colours, errors = [], [], []
-        for person_id, px, ok in people:
-            fitted.append(px[ok])
-            colours += [person_colour(person_id)] * int(ok.sum())
-            if rows is None:
-                continue
-            for det_id, det in rows.groupby("det_id"):
-                if person.get((frame, v, int(det_id))) != person_id:
-                    continue
-                seen = det[det["score"] > 0]
-                index = _joint_index(seen["joint"])
-                distance = np.linalg.norm(px[index] - seen[["x_px", "y_px"]].to_numpy(), axis=1)
-                errors += distance[np.isfinite(distance) & ok[index]].tolist()
-        out[frame] = (np.concatenate(fitted) if fitted else np.zeros((0, 2)), colours,
-                      float(np.mean(errors)) if errors else float("nan"))
-    return out
+            points = [px[ok] for px, ok in fit.people.values()]
+            colours = [person_colour(pid) for pid, (_, ok) in fit.people.items() for _ in range(int(ok.sum()))]
+            log(f"{base}/fit", rr.Points2D(np.concatenate(points) if points else np.zeros((0, 2)), colors=colours,
+                                           radii=2.0))
+            if np.isfinite(fit.error_px):
+                log(f"errors/{name}", rr.Scalars(fit.error_px))

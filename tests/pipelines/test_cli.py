@@ -175,3 +175,11 @@ def test_view_refuses_a_wrong_file_and_a_partition_never_computed(tmp_path, monk
     with pytest.raises(SystemExit, match=r"views of synthetic__nothing is not stored .*humancal update --partition"):
         main(["view", "--partition", "synthetic__nothing", "--save", str(tmp_path / "demo.rrd")])
     assert not (tmp_path / "demo.rrd").exists()
+
+
+def test_export_overlays_takes_mp4_only_and_needs_a_computed_partition(tmp_path, monkeypatch):
+    monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path))
+    with pytest.raises(SystemExit, match="overlays export supports --format mp4"):
+        main(["export", "overlays", "--partition", "synthetic__demo", "--format", "avi", "--out", str(tmp_path / "o")])
+    with pytest.raises(SystemExit, match=r"views of synthetic__nothing is not stored"):
+        main(["export", "overlays", "--partition", "synthetic__nothing", "--format", "mp4", "--out", str(tmp_path / "o")])

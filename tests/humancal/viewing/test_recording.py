@@ -89,17 +89,15 @@ def test_every_camera_person_mesh_and_view_is_in_the_file(recorded):
 def test_the_fit_of_the_truth_sits_on_the_detections(recorded):
     """The error plot's figure: the true keypoints reprojected are the detections' noise away (a few px)."""
     scene, names, summary, path = recorded
-    from humancal.viewing.recording import _reprojection
+    from humancal.viewing.reprojection import detection_people, reprojected_fit
 
     motions = FittedMotions.from_table(scene.motions, scene.config.fps)
     keypoints = {int(p): (motions.frames[motions.present[i]], motions.keypoints_world_m[i, motions.present[i]])
                  for i, p in enumerate(motions.person_ids)}
     cameras = cameras_from_table(scene.cameras)
-    view = CaptureView("v", names, {"final": cameras}, 30.0, keypoints_world_m=keypoints)
-    person = {(int(f), int(v), int(d)): int(p) for f, v, d, p in scene.associations[
-        ["frame", "view", "det_id", "person_id"]].itertuples(index=False)}
-    errors = [e for frame, (_, _, e) in _reprojection(view, 0, cameras[0], scene.detections[scene.detections["view"] == 0],
-                                                       person).items()]
+    fits = reprojected_fit(keypoints, 0, cameras[0], scene.detections[scene.detections["view"] == 0],
+                           detection_people(scene.associations))
+    errors = [fit.error_px for fit in fits.values()]
     assert np.isfinite(errors).all() and 0.0 < np.median(errors) < 10.0
 
 
@@ -113,3 +111,39 @@ def test_decimation_keeps_a_closed_lighter_mesh():
     assert abs(light.volume - sphere.volume) / sphere.volume < 0.1  # the same body, fewer triangles, outward
     with pytest.raises(ValueError, match="cell_m"):
         decimation(sphere.vertices, sphere.faces, cell_m=0.0)
+
+
+def test_overlays_draw_every_frame_of_every_view_in_the_people_colours(recorded, tmp_path):
+    import cv2
+
+    from humancal.viewing import person_colour
+    from humancal.viewing.overlays import write_overlays
+
+    scene, names, _, _ = recorded
+    motions = FittedMotions.from_table(scene.motions, scene.config.fps)
+    keypoints = {int(p): (motions.frames[motions.present[i]], motions.keypoints_world_m[i, motions.present[i]])
+                 for i, p in enumerate(motions.person_ids)}
+    view = CaptureView("v", names, {"final": cameras_from_table(scene.cameras)}, scene.config.fps,
+                       detections=scene.detections, associations=scene.associations, keypoints_world_m=keypoints)
+    result = write_overlays(view, tmp_path / "overlays", sheet_frames=3)
+    frames = scene.detections["frame"].nunique()
+    assert [p.name for p in result.videos] == [f"{name}.mp4" for name in names] and len(result.frames) == frames
+    capture = cv2.VideoCapture(str(result.videos[0]))
+    count, colours = 0, set()
+    while True:
+        ok, image = capture.read()
+        if not ok:
+            break
+        count += 1
+        pixels = image.reshape(-1, 3).astype(int)
+        for person_id in keypoints:  # the person's colour is drawn (MP4 compression: within a tolerance)
+            b, g, r = person_colour(person_id)[::-1]
+            if (np.abs(pixels - [b, g, r]).sum(1) < 40).sum() > 20:
+                colours.add(person_id)
+    assert count == frames and colours == set(keypoints)
+    sheet = cv2.imread(str(result.contact_sheet))
+    assert sheet.shape[1] == 3 * 320 and sheet.shape[0] >= len(names) * 100
+    assert all(0.0 < error < 10.0 for error in result.median_error_px)
+    assert not list((tmp_path / "overlays").glob(".*partial*"))
+    with pytest.raises(ValueError, match="no final cameras"):
+        write_overlays(CaptureView("v", names, {}, 30.0), tmp_path / "none")
