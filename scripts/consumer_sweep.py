@@ -49,14 +49,13 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import importlib.util  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
-import traceback  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import stress_sweep  # noqa: E402  (the calibration stress sweep, beside this script)
 from sweep_scoring import (  # noqa: E402
-    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, run_jobs, score_calibration, sweep_arguments)
+    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, calibrate_scene, quantiles, run_jobs, score_calibration, sweep_arguments)
 
 FAMILIES = ("phone", "action_cam", "webcam")
 """Scene ``i`` is of family ``FAMILIES[i % 3]``."""
@@ -139,8 +138,7 @@ def _lens_rows(estimated, truth, clocks: pd.DataFrame, offsets_s: np.ndarray) ->
 def run_scene(index: int, seed: int, oracle_sync: bool, lens: dict | None = None) -> dict:
     """Generate, (synchronise,) lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}.
     ``lens``: ``ExtrinsicsConfig`` lens settings (``lens_models``, ``principal_point``) other than the defaults."""
-    from humancal.calibration import (CalibrationError, ExtrinsicsConfig, IntrinsicsConfig, estimate_extrinsics,
-                                      estimate_intrinsics)
+    from humancal.calibration import ExtrinsicsConfig
     from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections
     from humancal.synthetic import generate_scene
@@ -176,20 +174,11 @@ def run_scene(index: int, seed: int, oracle_sync: bool, lens: dict | None = None
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     scene_row["lift_s"] = time.perf_counter() - clock
     sizes = [(c.width_px, c.height_px) for c in scene.rig]
-    clock = time.perf_counter()
-    try:
-        intrinsics = estimate_intrinsics(dense, lifted, sizes, IntrinsicsConfig(missing_upright="defer"))
-        result = estimate_extrinsics(dense, lifted, intrinsics, ExtrinsicsConfig(repair_views=worker["repair"],
-                                                                                  scale_from_limbs=worker["limbs"],
-                                                                                  **(lens or {})))
-    except CalibrationError as error:
-        scene_row.update(outcome="calibration_error", message=str(error), calibrate_s=time.perf_counter() - clock)
+    result = calibrate_scene(dense, lifted, sizes, ExtrinsicsConfig(repair_views=worker["repair"],
+                                                                     scale_from_limbs=worker["limbs"], **(lens or {})),
+                             scene_row)
+    if result is None:
         return {"scene": scene_row, "views": []}
-    except Exception as error:  # noqa: BLE001 - a crash is what the sweep counts, with its traceback
-        scene_row.update(outcome="crash", message=f"{type(error).__name__}: {error}",
-                         traceback=traceback.format_exc(), calibrate_s=time.perf_counter() - clock)
-        return {"scene": scene_row, "views": []}
-    scene_row["calibrate_s"] = time.perf_counter() - clock
     fields, views = score_calibration(result, list(scene.rig), index, 0)
     scene_row.update(fields)
     for row, extra in zip(views, _lens_rows(result.cameras, scene.rig, clocks, offsets)):

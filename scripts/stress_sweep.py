@@ -52,13 +52,12 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import json  # noqa: E402
 import logging  # noqa: E402
 import time  # noqa: E402
-import traceback  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from sweep_scoring import (  # noqa: E402,F401
-    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, quantiles, run_jobs, score_calibration, sweep_arguments)
+    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, calibrate_scene, quantiles, run_jobs, score_calibration, sweep_arguments)
 
 BEHAVIOURS = ("mixed", "mixed", "seated", "low")
 """Scene ``i`` has behaviour ``BEHAVIOURS[i % 4]``."""
@@ -150,8 +149,7 @@ def _init_worker(lifter_specs: list[str], repair: bool = True, limbs: bool = Tru
 
 def run_scene(index: int, seed: int, views: int | None = None) -> dict:
     """Generate, lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}."""
-    from humancal.calibration import (CalibrationError, ExtrinsicsConfig, IntrinsicsConfig, estimate_extrinsics,
-                                      estimate_intrinsics)
+    from humancal.calibration import ExtrinsicsConfig
     from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections
     from humancal.synthetic import generate_scene
@@ -170,19 +168,10 @@ def run_scene(index: int, seed: int, views: int | None = None) -> dict:
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     scene_row["lift_s"] = time.perf_counter() - clock
     sizes = [(c.width_px, c.height_px) for c in scene.rig]
-    clock = time.perf_counter()
-    try:
-        intrinsics = estimate_intrinsics(dense, lifted, sizes, IntrinsicsConfig(missing_upright="defer"))
-        result = estimate_extrinsics(dense, lifted, intrinsics, ExtrinsicsConfig(repair_views=_WORKER["repair"],
-                                                                                  scale_from_limbs=_WORKER["limbs"]))
-    except CalibrationError as error:
-        scene_row.update(outcome="calibration_error", message=str(error), calibrate_s=time.perf_counter() - clock)
+    result = calibrate_scene(dense, lifted, sizes, ExtrinsicsConfig(repair_views=_WORKER["repair"],
+                                                                     scale_from_limbs=_WORKER["limbs"]), scene_row)
+    if result is None:
         return {"scene": scene_row, "views": []}
-    except Exception as error:  # noqa: BLE001 - a crash is what the sweep counts, with its traceback
-        scene_row.update(outcome="crash", message=f"{type(error).__name__}: {error}",
-                         traceback=traceback.format_exc(), calibrate_s=time.perf_counter() - clock)
-        return {"scene": scene_row, "views": []}
-    scene_row["calibrate_s"] = time.perf_counter() - clock
     fields, views = score_calibration(result, list(scene.rig), index, scene_row["far_views"])
     scene_row.update(fields)
     return {"scene": scene_row, "views": views}

@@ -132,6 +132,29 @@ def score_calibration(result, true_cameras: list, index: int, far_views: int) ->
     return fields, views
 
 
+def calibrate_scene(dense, lifted, sizes: list, extrinsics_config, scene_row: dict):
+    """The calibration of one sweep scene (intrinsics with ``missing_upright="defer"``, then ``extrinsics_config``),
+    timed into ``scene_row["calibrate_s"]``; None, with ``outcome``, ``message`` (and a crash's ``traceback``)
+    recorded in ``scene_row``, when it raises: a ``CalibrationError`` is a named failure, anything else a crash."""
+    import traceback
+
+    from humancal.calibration import CalibrationError, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
+
+    clock = time.perf_counter()
+    try:
+        intrinsics = estimate_intrinsics(dense, lifted, sizes, IntrinsicsConfig(missing_upright="defer"))
+        result = estimate_extrinsics(dense, lifted, intrinsics, extrinsics_config)
+    except CalibrationError as error:
+        scene_row.update(outcome="calibration_error", message=str(error))
+        result = None
+    except Exception as error:  # noqa: BLE001 - a crash is what the sweep counts, with its traceback
+        scene_row.update(outcome="crash", message=f"{type(error).__name__}: {error}",
+                         traceback=traceback.format_exc())
+        result = None
+    scene_row["calibrate_s"] = time.perf_counter() - clock
+    return result
+
+
 def quantiles(values: pd.Series) -> dict:
     """``n``, median, 90th percentile and maximum of the values that are not NaN (``{"n": 0}`` for none)."""
     values = values.dropna()
