@@ -16,6 +16,8 @@ file)::
     view_fps: {cam2: 60}              # optional: per-view frame rates (the others: fps)
     unsynced: true                    # optional: the videos were started by hand (time offsets estimated)
     time_offsets: {cam2: 1.25}        # optional: seconds, view v's frame n is at n / fps_v + offset_v
+    videos: [cam1.mp4, cam2/, ...]    # optional: the footage, one video file or image folder per view (overlays,
+                                      # viewer; never used by the method)
 
 Relative paths are relative to the datasets file's folder. Reading a capture checks what was declared against the
 detections (:func:`load_capture`: image sizes, a 25-point skeleton, the views), then drops (and counts) joints
@@ -65,7 +67,7 @@ from humancal.formats.detections.skeleton_fit import check_skeleton_fit
 from humancal.formats.skeletons import SKELETONS
 from humancal.tables import empty_table, validate_table
 
-__all__ = ["OPTION_NAMES", "CaptureConfig", "CaptureSummary", "Capture", "load_capture",
+__all__ = ["OPTION_NAMES", "CaptureConfig", "CaptureSummary", "Capture", "load_capture", "view_name",
            "parse_image_size", "parse_principal_point", "principal_points_option"]
 
 log = logging.getLogger(__name__)
@@ -74,7 +76,7 @@ OPTION_NAMES: dict[str, str] = {"views": "views", "image_size": "image_size", "s
                                 "cameras_format": "cameras.format", "known_views": "cameras.views",
                                 "reference_cameras_format": "reference_cameras.format", "drop_views": "drop_views",
                                 "fps": "fps", "view_fps": "view_fps", "unsynced": "unsynced",
-                                "time_offsets": "time_offsets"}
+                                "time_offsets": "time_offsets", "videos": "videos"}
 """How messages name the capture options by default: as in a datasets file or ``capture.yaml``. The command line
 passes its flags instead (``load_capture(..., option_names=...)``)."""
 
@@ -106,6 +108,8 @@ class CaptureConfig:
             offset_v`` (views not named: 0); given by the user, or estimated by ``humancal add --unsynced``.
         principal_points_px: (V,) (cx_px, cy_px) per view when known (used by the calibration, which otherwise
             puts the principal point at the image centre), or ``None``.
+        videos: (V,) the footage, a video file or an image folder per view in view order, or ``None``: what the
+            overlays and the viewer draw on (:mod:`humancal.viewing.footage`); the method never reads it.
     """
 
     format: str
@@ -124,6 +128,7 @@ class CaptureConfig:
     view_fps: tuple[tuple[str, float], ...] = ()
     unsynced: bool = False
     time_offsets_s: tuple[tuple[str, float], ...] = ()
+    videos: tuple[Path, ...] | None = None
 
     @property
     def needs_sync(self) -> bool:
@@ -158,6 +163,9 @@ class CaptureConfig:
                                  f"got {dict(pairs)!r}")
         if self.principal_points_px is not None:
             principal_points_option([list(p) for p in self.principal_points_px], self.image_sizes_px)
+        if self.videos is not None and len(self.videos) != len(self.views):
+            raise ValueError(f"videos: expected one video file or image folder per view ({len(self.views)}), "
+                             f"got {len(self.videos)}")
 
     @classmethod
     def from_options(cls, options: Mapping[str, Any], base_dir: Path | None) -> CaptureConfig:
@@ -173,7 +181,7 @@ class CaptureConfig:
             return p if p.is_absolute() or base_dir is None else (base_dir / p)
 
         known = ("format", "views", "image_size", "skeleton", "cameras", "reference_cameras", "drop_views", "fps",
-                 "principal_point", "view_fps", "unsynced", "time_offsets")
+                 "principal_point", "view_fps", "unsynced", "time_offsets", "videos")
         unknown = sorted(set(options) - set(known))
         if unknown:
             raise ValueError(f"unknown option(s) {unknown}; expected {', '.join(known)}")
@@ -202,6 +210,9 @@ class CaptureConfig:
         unsynced = options.get("unsynced", False)
         if not isinstance(unsynced, bool):
             raise ValueError(f"unsynced: expected true or false, got {unsynced!r}")
+        videos = options.get("videos")
+        if videos is not None and not isinstance(videos, list):
+            raise ValueError(f"videos: expected a list of paths (a video file or image folder per view), got {videos!r}")
         return cls(
             format=options.get("format", "openpose"),
             views=tuple(path(v, f"views[{i}]") for i, v in enumerate(views)),
@@ -220,6 +231,7 @@ class CaptureConfig:
             time_offsets_s=named_numbers_option(options.get("time_offsets", {}), "time_offsets", positive=False),
             principal_points_px=(principal_points_option(options["principal_point"], sizes)  # type: ignore[arg-type]
                                  if options.get("principal_point") is not None else None),
+            videos=None if videos is None else tuple(path(v, f"videos[{i}]") for i, v in enumerate(videos)),
         )
 
     def to_options(self) -> dict[str, Any]:
@@ -258,6 +270,8 @@ class CaptureConfig:
             points = {tuple(p) for p in self.principal_points_px}
             options["principal_point"] = (list(points.pop()) if len(points) == 1
                                           else [list(p) for p in self.principal_points_px])
+        if self.videos is not None:
+            options["videos"] = [str(v) for v in self.videos]
         return options
 
 
@@ -278,6 +292,7 @@ class CaptureSummary:
         warnings: input that is probably wrong but usable, one line each (checks of ``load_capture``).
         sync: how unsynchronised views were put on view 0's clock (``humancal.sync.capture.CaptureSync``), or None
             (the views are in sync).
+        footage: per view, its footage in words (kind, size, frames), or empty without footage.
     """
 
     names: tuple[str, ...]
@@ -291,6 +306,7 @@ class CaptureSummary:
     total_frames: int = 0
     warnings: tuple[str, ...] = ()
     sync: Any = None
+    footage: tuple[str, ...] = ()
 
     def lines(self) -> list[str]:
         """The summary in words, one line per view and a last line for the capture."""
@@ -303,6 +319,8 @@ class CaptureSummary:
         ]
         if self.sync is not None:
             out = [f"{line}, {self.sync.view_text(v)}" for v, line in enumerate(out)]
+        if self.footage:
+            out = [f"{line}; footage: {footage}" for line, footage in zip(out, self.footage)]
         if len(self.known_cameras) == len(self.names):
             cams = "every camera known (used instead of a calibration)"
         elif self.known_cameras:
@@ -373,8 +391,10 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
     if not len(table):
         raise FormatError(config.views[0], None, "at least one detected joint in the capture's files", "none")
     V = len(config.views)
-    view_names = [_view_name(p, v) for v, p in enumerate(config.views)]
+    view_names = [view_name(p, v) for v, p in enumerate(config.views)]
     warnings = check_image_sizes(table, sizes, view_names, names["image_size"])
+    footage = _check_footage(config, table, view_names, sizes, names["videos"]) if config.videos is not None else []
+    warnings += [w for _, w in footage if w]
     skeleton = config.skeleton or table.attrs.get("skeleton")
     if skeleton is not None:
         family = OPENPOSE_SKELETONS if config.format == "openpose" else COCO_SKELETONS
@@ -422,6 +442,7 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
         total_frames=int(detections["frame"].nunique()),
         warnings=tuple(warnings),
         sync=sync,
+        footage=tuple(text for text, _ in footage),
     )
     capture = Capture(detections=detections, views=views, gt_cameras=gt_cameras, summary=summary,
                       known_cameras=known_cameras)
@@ -455,11 +476,32 @@ def _drop_views(capture: Capture, drop: tuple[str, ...], option: str) -> Capture
         placeholders=pick(summary.placeholders), off_image_joints=pick(summary.off_image_joints),
         known_cameras=tuple(n for n in summary.known_cameras if n not in drop),
         sync=summary.sync.pick(keep) if summary.sync is not None else None,
+        footage=pick(summary.footage) if summary.footage else (),
         warnings=summary.warnings + (f"views {list(drop)} left out ({option})",))
     return Capture(renumber(capture.detections), renumber(capture.views), renumber(capture.gt_cameras), summary,
                    renumber(capture.known_cameras))
 
 
-def _view_name(path: Path, view: int) -> str:
+def _check_footage(config: CaptureConfig, table: pd.DataFrame, view_names: list[str], sizes: Mapping[int, Any],
+                   option: str) -> list[tuple[str, str]]:
+    """Per view: its footage in words and a warning (or ""), after :func:`humancal.viewing.footage.check_footage`
+    against the view's image size and its detections' last frame (its own frame numbers)."""
+    from humancal.viewing.footage import check_footage, open_footage
+
+    last = table.groupby("view")["frame"].max()
+    out = []
+    for v, (name, path) in enumerate(zip(view_names, config.videos or ())):
+        try:
+            footage = open_footage(path)
+        except FileNotFoundError as err:
+            raise FileNotFoundError(f"{option}: view {name}: {err}") from None
+        warnings = check_footage(footage, name, tuple(sizes[v]), int(last.get(v, -1)), option)
+        out.append((f"{footage.kind} {footage.size_px[0]}x{footage.size_px[1]}, {footage.num_frames} frames",
+                    "; ".join(warnings)))
+    return out
+
+
+def view_name(path: Path, view: int) -> str:
+    """A view's name: its detection folder's name, or its file's stem (``view_<v>`` when empty)."""
     name = path.name if path.is_dir() else path.stem
     return name or f"view_{view}"

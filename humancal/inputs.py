@@ -13,7 +13,7 @@ from humancal.sequences import SequenceSpec
 from humancal.settings import DATA_DIR_ENV, DataRootError
 from humancal.tables import empty_table, validate_table
 
-__all__ = ["DEFAULT_FPS", "SequenceInputs", "body_fit_regime", "load_sequence_inputs", "sequence_fps",
+__all__ = ["DEFAULT_FPS", "SequenceInputs", "body_fit_regime", "capture_footage", "load_sequence_inputs", "sequence_fps",
            "sequence_principal_points"]
 
 DEFAULT_FPS = 30.0
@@ -73,6 +73,41 @@ def sequence_fps(spec: SequenceSpec) -> tuple[float, str]:
         name = options.pop("preset", "demo")
         return float(preset(name, **options).fps), f"synthetic preset {name!r}"
     return DEFAULT_FPS, f"default: {spec.key} states no frame rate"
+
+
+def capture_footage(spec: SequenceSpec, view_names: list[str]) -> list | None:
+    """The footage a capture was registered with (its ``videos`` option), per view of ``view_names`` (the stored
+    views: dropped views are not among them), each on the capture's clock (a view of another frame rate or time
+    offset reads its own frames: :class:`humancal.viewing.footage.Footage` ``frame_scale``, ``frame_offset``); None
+    when the sequence has no footage.
+
+    Raises:
+        FileNotFoundError, humancal.formats.FormatError: a video or image folder that is gone or unreadable.
+    """
+    if spec.kind != "capture" or not spec.options.get("videos"):
+        return None
+    import dataclasses
+
+    from humancal.captures import CaptureConfig, view_name
+    from humancal.sync.capture import DEFAULT_SYNC_FPS
+    from humancal.viewing.footage import open_footage
+
+    config = CaptureConfig.from_options(spec.options, Path(spec.source).parent if spec.source else None)
+    names = [view_name(p, v) for v, p in enumerate(config.views)]
+    rates = dict(config.view_fps)
+    offsets = dict(config.time_offsets_s)
+    default_fps = DEFAULT_SYNC_FPS if config.fps is None else float(config.fps)
+    fps0, offset0 = rates.get(names[0], default_fps), offsets.get(names[0], 0.0)
+    by_name = dict(zip(names, config.videos or ()))
+    out = []
+    for name in view_names:
+        if name not in by_name:
+            out.append(None)
+            continue
+        fps = rates.get(name, default_fps)
+        out.append(dataclasses.replace(open_footage(by_name[name]), frame_scale=fps / fps0,
+                                       frame_offset=(offset0 - offsets.get(name, 0.0)) * fps))
+    return out
 
 
 def sequence_principal_points(spec: SequenceSpec, image_sizes_px: list[tuple[int, int]]

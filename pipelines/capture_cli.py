@@ -4,7 +4,7 @@
                       [--cameras FILE [--cameras-format F] [--known-views NAME ...] [--refine-cameras]]
                       [--reference-cameras FILE [--reference-cameras-format F]] [--drop-view NAME ...]
                       [--fps FPS|NAME=FPS ...] [--unsynced | --time-offsets NAME=SECONDS ...]
-                      [--sequence SEQ]
+                      [--videos PATH [PATH ...]] [--sequence SEQ]
     humancal add NAME --coco FILE [FILE ...] --image-size WxH [...]
 
 Everything is checked first: every file is read once, and an error names the file and the field, or the view and
@@ -71,6 +71,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--principal-point", nargs="+", metavar="CX,CY",
                    help="known principal point in pixels, e.g. 963.5,541.2: one for all views or one per view "
                         "(default: the image centre, which the calibration then assumes)")
+    p.add_argument("--videos", nargs="+", metavar="PATH", type=Path,
+                   help="the footage, one video file or image folder per view in view order (frame n of a view is "
+                        "the video's n-th frame): drawn under `humancal export overlays` and in `humancal view`; "
+                        "never used by the calibration or the fit")
     p.add_argument("--sequence", default=DEFAULT_SEQUENCE, help=f"the second half of the partition key (default {DEFAULT_SEQUENCE})")
     p.set_defaults(func=cmd_add)
 
@@ -102,6 +106,9 @@ def cmd_add(args: argparse.Namespace) -> int:
             points = points * len(views)
         elif len(points) != len(views):
             raise ValueError(f"--principal-point: expected one point or one per view ({len(views)}), got {len(points)}")
+    if args.videos and len(args.videos) != len(views):
+        raise ValueError(f"--videos: expected one video file or image folder per view ({len(views)}), "
+                         f"got {len(args.videos)}")
     for flag, value, needs in (("--cameras-format", args.cameras_format, args.cameras),
                                ("--known-views", args.known_views, args.cameras),
                                ("--refine-cameras", args.refine_cameras, args.cameras),
@@ -129,6 +136,7 @@ def cmd_add(args: argparse.Namespace) -> int:
         unsynced=args.unsynced,
         time_offsets_s=offsets,
         principal_points_px=tuple(points) if points else None,
+        videos=tuple(p.expanduser().resolve() for p in args.videos) if args.videos else None,
     )
     key = partition_key(args.name, args.sequence)
     if key in load_datasets_config():  # the cheap check first; add_user_sequence checks again before writing
@@ -136,7 +144,8 @@ def cmd_add(args: argparse.Namespace) -> int:
     flags = {"views": "--openpose" if args.openpose else "--coco", "image_size": "--image-size",
              "skeleton": "--skeleton", "cameras_format": "--cameras-format", "known_views": "--known-views",
              "reference_cameras_format": "--reference-cameras-format", "drop_views": "--drop-view",
-             "fps": "--fps", "view_fps": "--fps", "unsynced": "--unsynced", "time_offsets": "--time-offsets"}
+             "fps": "--fps", "view_fps": "--fps", "unsynced": "--unsynced", "time_offsets": "--time-offsets",
+             "videos": "--videos"}
     capture = load_capture(config, args.sequence, option_names=flags)
     sync = capture.summary.sync
     if config.unsynced and sync is not None:

@@ -7,6 +7,9 @@
     humancal benchmark --partition P [--methods M,...]   fit the paper's regimes (method_tables), then report --benchmark
     humancal export detections|cameras --partition P --format F --out PATH
     humancal export motions --partition P --format bvh|gltf|npz|obj --out DIR [--frames A:B[:S]] [--fps F]
+    humancal export overlays --partition P --format mp4 --out DIR [--videos PATH ...]   (docs/viewing.md)
+    humancal export footage --partition P --format mp4 --out DIR   plain footage of a synthetic scene
+    humancal view --partition P [--save FILE.rrd]   the result in 3D (Rerun)
     humancal train lifter [--discard]    train the lifter here (replaces the shipped weights), or go back to them
     humancal train prior [--variant V]   train a motion prior variant here and compute its held-out figures
     humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/capture_cli.py)
@@ -283,11 +286,12 @@ def _add_export_parser(sub) -> None:
     from pipelines.format_names import CAMERA_FORMATS, MOTION_FORMATS
 
     p = sub.add_parser("export", help="write stored detections, cameras or fitted motions in another tool's format")
-    p.add_argument("what", choices=("detections", "cameras", "motions", "overlays"))
+    p.add_argument("what", choices=("detections", "cameras", "motions", "overlays", "footage"))
     p.add_argument("--partition", required=True)
     p.add_argument("--format", required=True,
                    help=f"openpose (detections); {', '.join(CAMERA_FORMATS)} (cameras); {', '.join(MOTION_FORMATS)} "
-                        "(motions; see docs/formats.md); mp4 (overlays: one video per view and a contact sheet)")
+                        "(motions; see docs/formats.md); mp4 (overlays: one video per view and a contact sheet; "
+                        "footage: a synthetic scene's people as silhouettes, one video per view)")
     p.add_argument("--out", required=True, help="output folder (detections, motions, easymocap, colmap) or file")
     p.add_argument("--frames", default=None,
                    help="motions (obj only) and overlays: START:STOP[:STEP] sequence frame numbers to write "
@@ -299,6 +303,11 @@ def _add_export_parser(sub) -> None:
                         "the refinement passed its check, else the calibrated ones), extrinsics, refined_cameras")
     p.add_argument("--ground-truth", action="store_true",
                    help="export the dataset's ground-truth cameras (gt_cameras) instead of the estimated ones")
+    p.add_argument("--videos", nargs="+", metavar="PATH", default=None,
+                   help="overlays: draw on this footage, one video file or image folder per view, or one folder "
+                        "holding <view>.mp4 per view (default: the footage given to `humancal add --videos`)")
+    p.add_argument("--no-detections", action="store_true",
+                   help="overlays: draw the reprojected fit only, not the detections")
     p.add_argument("--overwrite", action="store_true",
                    help="replace what is at --out (without it an existing file or non-empty folder is an error)")
     p.set_defaults(func=cmd_export)

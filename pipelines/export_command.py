@@ -1,4 +1,4 @@
-"""``humancal export detections|cameras|motions``: stored artifacts of a partition in other tools' formats.
+"""``humancal export detections|cameras|motions|overlays|footage``: stored artifacts of a partition in other tools' formats.
 
 One rule for every export: it refuses to write where something is already there (``--out`` names an existing
 file, or a folder that is not empty) and says so, naming the path; ``--overwrite`` replaces what the export writes
@@ -76,10 +76,13 @@ def cmd_export(args) -> int:
 
 
 def _export(args) -> int:
-    if args.what == "overlays":
-        from pipelines.view_command import export_overlays
+    for flag, given in (("--videos", getattr(args, "videos", None)), ("--no-detections", getattr(args, "no_detections", False))):
+        if given and args.what != "overlays":
+            raise SystemExit(f"humancal: {flag} is an option of `export overlays`, not of `export {args.what}`")
+    if args.what in ("overlays", "footage"):
+        from pipelines.view_command import export_footage, export_overlays
 
-        return export_overlays(args)
+        return export_overlays(args) if args.what == "overlays" else export_footage(args)
     if args.what == "motions":
         from pipelines.format_names import MOTION_FORMATS
         from pipelines.motions_export import export_stored_motions

@@ -1,5 +1,9 @@
 """``humancal view``: the stored result of one partition as a Rerun recording (``humancal.viewing``).
 
+Where the capture has footage (``humancal add --videos``, or ``--videos`` here) the views' images are in the
+recording and under the overlays (``humancal export overlays``); ``humancal export footage`` renders plain footage of
+a synthetic scene's people, so that both can be seen without real videos.
+
 With ``--save FILE.rrd`` the recording is written (open it with ``rerun FILE.rrd``, or drop it on
 https://rerun.io/viewer); without, it is shown: in Rerun's native viewer when there is a display, else in its web
 viewer served on 127.0.0.1 until Ctrl-C.
@@ -25,6 +29,11 @@ def add_parser(sub) -> None:
     p.add_argument("--no-mesh", action="store_true", help="no body meshes (the skeletons only; fastest)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --save file")
     p.add_argument("--port", type=int, default=9090, help="web viewer port when there is no display")
+    p.add_argument("--videos", nargs="+", metavar="PATH", default=None,
+                   help="show this footage in the views: one video file or image folder per view, or one folder "
+                        "holding <view>.mp4 per view (default: the footage given to `humancal add --videos`)")
+    p.add_argument("--image-every", type=int, default=1, metavar="N",
+                   help="log every N-th frame of the footage (a lighter file; default every frame)")
     p.set_defaults(func=cmd_view)
 
 
@@ -36,8 +45,20 @@ def _optional(asset: str, partition: str):
         return None
 
 
-def capture_view(partition: str, *, meshes: bool = True):
-    """The :class:`humancal.viewing.CaptureView` of a partition's stored tables."""
+def _footage(partition: str, view_names: list[str], videos: list[str] | None):
+    """Per view its footage (``--videos``, else the capture's own), or None when there is none."""
+    from humancal.inputs import capture_footage
+    from humancal.viewing.footage import footage_for_views
+    from pipelines.definitions import defs
+
+    if videos:
+        return footage_for_views(videos, view_names, "--videos")
+    return capture_footage(defs.resources["datasets"].spec(partition), view_names)
+
+
+def capture_view(partition: str, *, meshes: bool = True, videos: list[str] | None = None):
+    """The :class:`humancal.viewing.CaptureView` of a partition's stored tables (and its footage: ``videos``, else
+    the capture's own)."""
     from humancal.camera import cameras_from_table
     from humancal.fitting import FittedMotions
     from humancal.viewing import CaptureView
@@ -61,9 +82,10 @@ def capture_view(partition: str, *, meshes: bool = True):
             keypoints[int(person_id)] = (motions.frames[present], motions.keypoints_world_m[index, present])
         if meshes:
             vertices, faces = _meshes(motions)
-    return CaptureView(partition, views["name"].tolist(), cameras, fps, _optional("skeletons3d", partition),
+    names = views["name"].tolist()
+    return CaptureView(partition, names, cameras, fps, _optional("skeletons3d", partition),
                        _optional("raw_detections", partition), _optional("associations", partition), keypoints,
-                       vertices, faces)
+                       vertices, faces, _footage(partition, names, videos))
 
 
 def _meshes(motions, chunk: int = 64):
@@ -102,7 +124,7 @@ def export_overlays(args) -> int:
     if args.format != "mp4":
         raise SystemExit("humancal: overlays export supports --format mp4")
     out = check_out(args.out, args.overwrite)
-    view = capture_view(args.partition, meshes=False)
+    view = capture_view(args.partition, meshes=False, videos=args.videos)
     frames = None
     selection = _frame_slice(args.frames)
     if selection is not None and view.detections is not None:
@@ -114,9 +136,44 @@ def export_overlays(args) -> int:
             raise SystemExit(f"humancal: --frames {args.frames} selects none of {args.partition}'s frames "
                              f"({numbers[0]}-{numbers[-1]})")
     start = time.perf_counter()
-    result = write_overlays(view, out, frames=frames, progress=lambda line: print(line, flush=True))
+    result = write_overlays(view, out, frames=frames, show_detections=not args.no_detections,
+                            progress=lambda line: print(line, flush=True))
+    drawn_on = sum(f is not None for f in view.footage or ())
     print(f"wrote {len(result.videos)} videos of {len(result.frames)} frames and {result.contact_sheet} "
-          f"({time.perf_counter() - start:.1f} s)")
+          f"({'on the footage of ' + str(drawn_on) + ' views' if drawn_on else 'no footage'}, "
+          f"{time.perf_counter() - start:.1f} s)")
+    return 0
+
+
+def export_footage(args) -> int:
+    """``humancal export footage``: a synthetic scene's true bodies as silhouettes, filmed by its true cameras, one MP4
+    per view (``humancal.viewing.footage.write_footage``): footage to try the overlays and the viewer on."""
+    from humancal.camera import cameras_from_table
+    from humancal.fitting import FittedMotions
+    from humancal.viewing.footage import write_footage
+    from pipelines.motions_export import _sequence_fps
+
+    if args.format != "mp4":
+        raise SystemExit("humancal: footage export supports --format mp4")
+    out = check_out(args.out, args.overwrite)
+    motions_table = _optional("gt_motions", args.partition)
+    if motions_table is None or not len(motions_table):
+        raise SystemExit(f"humancal: {args.partition} has no true body motions (gt_motions) to film: footage is "
+                         "rendered for synthetic scenes only; a capture brings its own (humancal add --videos)")
+    start = time.perf_counter()
+    views = stored_table("views", args.partition)
+    cameras = cameras_from_table(stored_table("gt_cameras", args.partition))
+    fps = _sequence_fps(args.partition)[0]
+    motions = FittedMotions.from_table(motions_table, fps)
+    frames = range(int(motions.frames[0]), int(motions.frames[-1]) + 1)
+    if motions.frames[0] != 0:
+        raise SystemExit(f"humancal: {args.partition}'s motions start at frame {motions.frames[0]}, not 0")
+    meshes, faces = _meshes(motions)
+    paths = write_footage(views["name"].tolist(), cameras, meshes, faces, list(frames), fps, out,
+                          progress=lambda line: print(line, flush=True))
+    print(f"wrote {len(paths)} videos of {len(frames)} frames under {out} ({time.perf_counter() - start:.1f} s); "
+          f"draw on them: humancal export overlays --partition {args.partition} --format mp4 --videos {out} "
+          f"--out overlays/")
     return 0
 
 
@@ -129,7 +186,9 @@ def cmd_view(args) -> int:
     save = None if args.save is None else check_out(args.save, args.overwrite)
     if save is not None and save.suffix != ".rrd":
         raise SystemExit(f"humancal: --save {save}: a Rerun recording file ends in .rrd")
-    view = capture_view(args.partition, meshes=not args.no_mesh)
+    if args.image_every < 1:
+        raise SystemExit(f"humancal: --image-every expects a positive number of frames, got {args.image_every}")
+    view = capture_view(args.partition, meshes=not args.no_mesh, videos=args.videos)
     recording = rr.RecordingStream("humancal", recording_id=args.partition)
     layout = blueprint(view.view_names)
     partial = None
@@ -143,7 +202,7 @@ def cmd_view(args) -> int:
         rr.serve_web_viewer(web_port=args.port, open_browser=False, connect_to=url)
         print(f"web viewer: http://127.0.0.1:{args.port}/?url={url} (Ctrl-C stops it)", flush=True)
     try:
-        summary = record_capture(view, recording, full_mesh=args.full_mesh,
+        summary = record_capture(view, recording, full_mesh=args.full_mesh, image_every=args.image_every,
                                  progress=lambda line: print(line, flush=True))
         recording.flush()
     except BaseException:

@@ -1,13 +1,15 @@
 """Overlays per view: the detections and the fitted people drawn in each camera's image, as MP4 files and a contact
 sheet.
 
-Each frame shows, in the view's image frame (on a dark background: humancal keeps no footage):
+Each frame shows, in the view's image frame (on the view's footage when the capture has it, else on a dark
+background):
 
 * every detection's skeleton, thin, in its person's colour (grey where the association rejected it);
 * the fitted body's keypoints reprojected as a thick skeleton in the same colour, with the person id at the head;
 * the frame number, the view's name and its mean reprojection error of the frame (pixels).
 
 Colours are :func:`humancal.viewing.recording.person_colour`, the same as in the 3D viewer.
+:func:`distance_to_colour` measures a written frame: how far given points are from the pixels drawn in a colour.
 """
 
 from __future__ import annotations
@@ -22,10 +24,11 @@ import numpy as np
 import pandas as pd
 
 from humancal.keypoints import JOINT_INDEX, LIMB_INDEX
+from humancal.viewing.footage import FootageReader
 from humancal.viewing.recording import CaptureView, person_colour
 from humancal.viewing.reprojection import FrameFit, detection_people, joint_index, reprojected_fit
 
-__all__ = ["OverlayResult", "draw_frame", "write_overlays"]
+__all__ = ["OverlayResult", "distance_to_colour", "draw_frame", "write_overlays"]
 
 _REJECTED = (150, 150, 150)
 _BACKGROUND = (32, 32, 32)
@@ -61,7 +64,7 @@ def _skeleton(image: np.ndarray, px: np.ndarray, ok: np.ndarray, colour, thickne
 
 
 def draw_frame(size_px: tuple[int, int], detections: pd.DataFrame | None, fit: FrameFit | None, view: int, frame: int,
-               people: dict, label: str, scale: float = 1.0) -> np.ndarray:
+               people: dict, label: str, scale: float = 1.0, background: np.ndarray | None = None) -> np.ndarray:
     """One overlay image (BGR, ``scale`` times the camera's ``size_px`` = (width, height)).
 
     Args:
@@ -72,9 +75,14 @@ def draw_frame(size_px: tuple[int, int], detections: pd.DataFrame | None, fit: F
         people: :func:`humancal.viewing.reprojection.detection_people`.
         label: the view's name.
         scale: drawing scale (smaller files for large images).
+        background: the view's image at this frame (BGR, any size of the camera's aspect ratio: resized), or None
+            (a plain dark background).
     """
     width, height = (int(round(s * scale)) for s in size_px)
-    image = np.full((height, width, 3), _BACKGROUND, dtype=np.uint8)
+    if background is None:
+        image = np.full((height, width, 3), _BACKGROUND, dtype=np.uint8)
+    else:
+        image = cv2.resize(background, (width, height), interpolation=cv2.INTER_AREA)
     thin, thick = max(1, int(round(2 * scale))), max(2, int(round(5 * scale)))
     if detections is not None:
         for det_id, det in detections.groupby("det_id"):
@@ -97,14 +105,17 @@ def draw_frame(size_px: tuple[int, int], detections: pd.DataFrame | None, fit: F
 
 
 def write_overlays(view: CaptureView, out_dir: str | Path, *, frames: Sequence[int] | None = None,
+                   show_detections: bool = True,
                    max_width_px: int = 960, sheet_frames: int = 4,
                    progress: Callable[[str], None] = lambda message: None) -> OverlayResult:
     """One MP4 per view (``<view>.mp4``) and ``contact_sheet.png`` under ``out_dir`` (module docstring).
 
     Args:
-        view: the capture's tables (``cameras["final"]``, ``detections``, ``associations``, ``keypoints_world_m``).
+        view: the capture's tables (``cameras["final"]``, ``detections``, ``associations``, ``keypoints_world_m``)
+            and its ``footage`` (drawn under the overlays where a view has it).
         out_dir: the folder (created); each file is written under a temporary name and renamed when complete.
         frames: the frame numbers to draw (default: every frame with a detection).
+        show_detections: draw the detections (False: the reprojected fit only).
         max_width_px: images wider than this are drawn smaller.
         sheet_frames: frames per view in the contact sheet, evenly spread.
         progress: called with one line per view.
@@ -135,15 +146,20 @@ def write_overlays(view: CaptureView, out_dir: str | Path, *, frames: Sequence[i
         if not writer.isOpened():
             raise OSError(errno.EIO, "OpenCV cannot write an MP4 video here", str(partial))
         row = []
+        reader = FootageReader(view.footage[v]) if view.footage and view.footage[v] is not None else None
         try:
             for frame in drawn:
-                image = draw_frame((camera.width_px, camera.height_px), by_frame.get(int(frame)), fits.get(int(frame)),
-                                   v, int(frame), people, name, scale)
+                image = draw_frame((camera.width_px, camera.height_px),
+                                   by_frame.get(int(frame)) if show_detections else None, fits.get(int(frame)),
+                                   v, int(frame), people, name, scale,
+                                   None if reader is None else reader.frame(int(frame)))
                 writer.write(image)
                 if int(frame) in sheet_at:
                     row.append(cv2.resize(image, (320, int(round(320 * size[1] / size[0])))))
         finally:
             writer.release()
+            if reader is not None:
+                reader.close()
         partial.replace(path)
         videos.append(path)
         errors = [f.error_px for f in fits.values() if np.isfinite(f.error_px)]
@@ -167,3 +183,27 @@ def _contact_sheet(rows: list[list[np.ndarray]]) -> np.ndarray:
         for c, tile in enumerate(row):
             sheet[r * height : r * height + tile.shape[0], c * 320 : (c + 1) * 320] = tile
     return sheet
+
+
+def distance_to_colour(image_bgr: np.ndarray, colour_rgb, points_px: np.ndarray, tolerance: int = 60) -> np.ndarray:
+    """How far each point is from the nearest pixel drawn in ``colour_rgb`` (within ``tolerance``, the sum of the
+    three channels' differences: video compression moves colours), pixels; inf where no pixel has the colour.
+
+    Args:
+        image_bgr: (H, W, 3) a written frame.
+        colour_rgb: the drawn colour.
+        points_px: (N, 2) positions in the image, pixels.
+    """
+    difference = np.abs(image_bgr.astype(np.int16) - np.array(colour_rgb[::-1], dtype=np.int16)).sum(2)
+    mask = difference < tolerance
+    points = np.asarray(points_px, dtype=np.float64).reshape(-1, 2)
+    if not mask.any():
+        return np.full(len(points), np.inf)
+    distance = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 5)
+    height, width = mask.shape
+    out = np.full(len(points), np.inf)
+    inside = np.isfinite(points).all(1)
+    inside[inside] = ((points[inside] >= 0) & (points[inside] < [width, height])).all(1)
+    x, y = np.floor(points[inside]).astype(int).T
+    out[inside] = distance[y, x]
+    return out

@@ -10,7 +10,8 @@ Entities (world metres, Z up, ``docs/conventions.md``):
 * ``world/people/<id>/body``: the fitted anny mesh per frame (decimated, :mod:`.mesh`, unless ``full_mesh``);
 * ``world/cameras/final/<view>/detections``: the 2D detections of each frame in that camera's image (grey where
   the association rejected them); ``.../fit``: the fitted keypoints reprojected; ``errors/<view>``: the view's mean
-  reprojection error of the fit per frame (a scalar plot).
+  reprojection error of the fit per frame (a scalar plot);
+* ``world/cameras/final/<view>/image``: the view's footage per frame (JPEG), when the capture has it.
 
 Timelines: ``frame`` (the sequence's frame numbers) and ``time`` (seconds at the capture's frame rate).
 """
@@ -26,6 +27,7 @@ import rerun as rr
 
 from humancal.camera import Camera
 from humancal.keypoints import JOINT_INDEX, LIMB_INDEX, NUM_JOINTS
+from humancal.viewing.footage import Footage, FootageReader
 from humancal.viewing.mesh import decimation
 from humancal.viewing.reprojection import detection_people, joint_index, reprojected_fit
 
@@ -61,6 +63,7 @@ class CaptureView:
         associations: the ``associations`` table (person id per detection; -1 rejected).
         keypoints_world_m: person id -> ((T,) frames, (T, 23, 3) fitted keypoints), from ``fitted_motions``.
         meshes: person id -> ((T,) frames, (T, V, 3) vertices), and ``faces`` (F, 3): the fitted bodies.
+        footage: per view, its footage (None where a view has none), or None: the images under the overlays.
     """
 
     name: str
@@ -73,6 +76,7 @@ class CaptureView:
     keypoints_world_m: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     meshes: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     faces: np.ndarray | None = None
+    footage: Sequence[Footage | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -87,8 +91,8 @@ class RecordingSummary:
 
 
 def record_capture(view: CaptureView, recording: rr.RecordingStream, *, full_mesh: bool = False,
-                   mesh_cell_m: float = 0.03, progress: Callable[[str], None] = lambda message: None
-                   ) -> RecordingSummary:
+                   mesh_cell_m: float = 0.03, image_every: int = 1, jpeg_quality: int = 75,
+                   progress: Callable[[str], None] = lambda message: None) -> RecordingSummary:
     """Log ``view`` into ``recording`` (module docstring for the entities).
 
     Args:
@@ -96,6 +100,8 @@ def record_capture(view: CaptureView, recording: rr.RecordingStream, *, full_mes
         recording: an open Rerun recording stream (e.g. ``rr.RecordingStream("humancal")`` with ``.save(path)``).
         full_mesh: log anny's full mesh (about 14k vertices) instead of a decimated one.
         mesh_cell_m: the decimation's cell size, metres.
+        image_every: log every n-th frame of the footage (a lighter file).
+        jpeg_quality: the footage's JPEG quality (0-100).
         progress: called with one line per stage.
     """
     counts: dict[str, int] = {}
@@ -124,6 +130,9 @@ def record_capture(view: CaptureView, recording: rr.RecordingStream, *, full_mes
     if view.detections is not None and len(view.detections) and "final" in view.cameras:
         _log_views(log, at, view)
         progress(f"2D: {len(view.view_names)} views")
+    if view.footage and "final" in view.cameras and view.detections is not None and len(view.detections):
+        logged = _log_footage(log, at, view, image_every, jpeg_quality)
+        progress(f"footage: {logged} images")
     return RecordingSummary(counts)
 
 
@@ -191,6 +200,30 @@ def _log_meshes(log, at, view: CaptureView, full_mesh: bool, cell_m: float) -> N
             at(frame)
             log(f"world/people/{person_id}/body", rr.Mesh3D(vertex_positions=frame_vertices[keep],
                                                             triangle_indices=faces, albedo_factor=[*colour, 160]))
+
+
+def _log_footage(log, at, view: CaptureView, every: int, quality: int) -> int:
+    """Each view's footage at the frames with detections (every ``every``-th), as JPEG images in its camera."""
+    import cv2
+
+    frames = np.asarray(sorted(view.detections["frame"].unique()))[:: max(1, every)]
+    logged = 0
+    for name, camera, footage in zip(view.view_names, view.cameras["final"], view.footage):
+        if footage is None:
+            continue
+        with FootageReader(footage) as reader:
+            for frame in frames:
+                image = reader.frame(int(frame))
+                if image is None:
+                    continue
+                if image.shape[:2] != (camera.height_px, camera.width_px):  # the camera's pixels, for the overlays
+                    image = cv2.resize(image, (camera.width_px, camera.height_px), interpolation=cv2.INTER_AREA)
+                ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+                at(frame)
+                log(f"world/cameras/final/{name}/image", rr.EncodedImage(contents=jpeg.tobytes(),
+                                                                         media_type="image/jpeg"))
+                logged += 1
+    return logged
 
 
 def _log_views(log, at, view: CaptureView) -> None:

@@ -360,6 +360,31 @@ def test_views_that_cannot_be_right_are_errors(tmp_path, state, capsys):
                   "(--openpose)?")
 
 
+def test_footage_is_checked_against_the_views_and_stored_with_the_capture(tmp_path, state, capsys):
+    import cv2
+
+    views = _views(tmp_path / "op")
+    footage = []
+    for v, shape in enumerate([(240, 320), (240, 320), (240, 240)]):  # two at half size, one square
+        folder = tmp_path / "frames" / f"cam{v + 1:02d}"
+        folder.mkdir(parents=True)
+        for f in range(2):
+            cv2.imwrite(str(folder / f"{f:06d}.jpg"), np.zeros((*shape, 3), np.uint8))
+        footage.append(str(folder))
+    size = ["--image-size", "640x480", "--skeleton", "body25"]
+    assert _add("lab", "--openpose", *views, *size, "--videos", footage[0]) == 2
+    _expect_error(capsys, state, "--videos", "one video file or image folder per view (2), got 1")
+    assert _add("lab", "--openpose", *views, *size, "--videos", footage[0], footage[2]) == 2
+    _expect_error(capsys, state, "--videos: view cam02", "240x240 frames", "image size is 640x480")
+    assert _add("lab", "--openpose", *views, *size, "--videos", footage[0], str(tmp_path / "gone.mp4")) == 2
+    _expect_error(capsys, state, "--videos: view cam02", "gone.mp4: no such video file or image folder")
+    assert _add("lab", "--openpose", *views, *size, "--videos", *footage[:2]) == 0
+    out = capsys.readouterr().out
+    assert "footage: images 320x240, 2 frames" in out and "ends at frame 1, its detections run to frame 2" in out
+    entry = yaml.safe_load(_user_file(state).read_text())["datasets"]["lab"]["sequences"]["capture"]
+    assert entry["videos"] == footage[:2]
+
+
 def test_views_sharing_few_frames_are_registered_with_a_warning(tmp_path, state, capsys):
     first = _people_views(tmp_path / "a", views=1, frames=range(0, 20))
     second = _people_views(tmp_path / "b", views=1, frames=range(17, 40), feet=(520.0, 690.0))
@@ -399,8 +424,9 @@ def test_qualisys_calibration_as_known_cameras(tmp_path, state, capsys):
 # --- end to end: synthetic truth -> files -> add -> update -> export -> compare -------------------------------------
 
 
-def _write_synthetic_capture(root: Path, body_model, num_frames: int = 80):
-    """A 4-person, 5-view synthetic scene as OpenPose folders, COCO files and a Pose2Sim calibration."""
+def _write_synthetic_capture(root: Path, body_model, num_frames: int = 80, footage_every: int = 0):
+    """A 4-person, 5-view synthetic scene as OpenPose folders, COCO files and a Pose2Sim calibration; with
+    ``footage_every``, also footage as image folders (``root/footage/<view>``, every n-th frame: the rest missing)."""
     from humancal.camera import cameras_from_table
     from humancal.formats import write_cameras, write_openpose
     from humancal.formats.joint_mapping import from_canonical
@@ -422,7 +448,36 @@ def _write_synthetic_capture(root: Path, body_model, num_frames: int = 80):
     for v, entries in coco.items():
         coco_files.append(root / f"cam{v}.json")
         coco_files[-1].write_text(json.dumps(entries))
+    if footage_every:
+        _write_footage_images(scene, cameras, body_model, root / "footage", folders, footage_every)
     return folders, coco_files, cameras
+
+
+def _write_footage_images(scene, cameras, body_model, root: Path, folders: dict, every: int) -> None:
+    """The scene's true bodies as silhouettes, one image folder per view named like its detections' folder."""
+    import cv2
+    import torch
+
+    from humancal.fitting import FittedMotions
+    from humancal.viewing.footage import render_silhouettes
+    from humancal.viewing.mesh import decimation
+
+    motions = FittedMotions.from_table(scene.motions, scene.config.fps)
+    frames = np.arange(0, scene.config.num_frames, every)
+    with torch.no_grad():
+        vertices = [body_model.reference_forward(
+            torch.as_tensor(motions.phenotypes[i : i + 1], dtype=body_model.dtype),
+            torch.as_tensor(motions.bone_rotmats_local[i, frames][None], dtype=body_model.dtype),
+            torch.as_tensor(motions.root_translation_m[i, frames][None], dtype=body_model.dtype),
+        )["vertices"][0].numpy() for i in range(len(motions.person_ids))]
+    light = [decimation(v[0], body_model.faces.numpy(), 0.03) for v in vertices]
+    for v, folder in folders.items():
+        out = root / Path(folder).name
+        out.mkdir(parents=True)
+        for t, frame in enumerate(frames):
+            image = render_silhouettes(cameras[v], [vs[t][keep] for vs, (keep, _) in zip(vertices, light)],
+                                       [faces for _, faces in light])
+            cv2.imwrite(str(out / f"{Path(folder).name}_{frame:06d}.jpg"), image)
 
 
 def test_openpose_capture_reads_back_the_synthetic_detections(tmp_path, state, body_model):
@@ -475,11 +530,13 @@ def _assert_close_to_truth(estimated, truth, label: str, capsys) -> dict:
 
 
 def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, monkeypatch, capsys, body_model):
-    folders, _, truth = _write_synthetic_capture(tmp_path / "capture", body_model)
+    folders, _, truth = _write_synthetic_capture(tmp_path / "capture", body_model, footage_every=20)
     # A known principal point half a pixel off the centre (the truth's): small enough not to matter, and it must
     # reach the calibrated cameras, which would otherwise have theirs at the image centre.
+    footage = [str(tmp_path / "capture" / "footage" / Path(f).name) for f in folders.values()]
     args = ["--openpose", *map(str, folders.values()), "--image-size", "1920x1080", "--skeleton", "body25",
-            "--reference-cameras", str(tmp_path / "capture" / "calib.toml"), "--principal-point", "960.5,539.5"]
+            "--reference-cameras", str(tmp_path / "capture" / "calib.toml"), "--principal-point", "960.5,539.5",
+            "--videos", *footage]
     estimated = _calibrate_and_compare("oplab__capture", args, tmp_path, monkeypatch, capsys)
     _assert_close_to_truth(estimated, truth, "openpose capture", capsys)
     for camera in estimated:
@@ -487,6 +544,14 @@ def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state
     assert main(["report", "--partition", "oplab__capture", "--format", "csv"]) == 0
     report = capsys.readouterr().out
     assert "focal_error_pct" in report and "mpjpe" not in report  # known cameras: camera rows; no identities
+    # the footage given at `add` is under the overlays and in the recording (frames without an image: none drawn)
+    overlays = tmp_path / "overlays"
+    assert main(["export", "overlays", "--partition", "oplab__capture", "--format", "mp4", "--out", str(overlays),
+                 "--frames", "0:80:20"]) == 0
+    assert "on the footage of 5 views" in capsys.readouterr().out and len(list(overlays.glob("*.mp4"))) == 5
+    recording = tmp_path / "capture.rrd"
+    assert main(["view", "--partition", "oplab__capture", "--no-mesh", "--save", str(recording)]) == 0
+    assert "footage: 20 images" in capsys.readouterr().out and recording.stat().st_size > 0
 
 
 @pytest.mark.slow

@@ -49,7 +49,7 @@ from humancal.formats.joint_mapping import from_canonical, to_canonical
 from humancal.formats.skeletons import Skeleton, get_skeleton
 from humancal.keypoints import NUM_JOINTS
 
-__all__ = ["OPENPOSE_SKELETONS", "list_openpose_frames", "read_openpose_file", "read_openpose", "write_openpose"]
+__all__ = ["OPENPOSE_SKELETONS", "frame_numbers_in_names", "list_openpose_frames", "read_openpose_file", "read_openpose", "write_openpose"]
 
 logger = logging.getLogger(__name__)
 
@@ -62,7 +62,7 @@ _SUFFIX = "_keypoints.json"
 FrameFrom = Literal["auto", "name_number", "name_order"]
 
 
-def _frame_numbers(names: list[str]) -> list[int] | None:
+def frame_numbers_in_names(names: list[str]) -> list[int] | None:
     """The frame number in each file name, or None when the names carry no distinct frame numbers.
 
     The frame is the number that varies between names at the same position (the camera number in
@@ -89,7 +89,7 @@ def _list_frames(folder: Path, frame_from: str) -> tuple[list[tuple[int, Path]],
     files = sorted(p for p in folder.iterdir() if p.suffix == ".json" and not p.name.startswith(".") and p.is_file())
     if not files:
         raise FormatError(folder, None, "OpenPose JSON files ('<video>_<frame:012d>_keypoints.json' or '*.json')", "none")
-    numbers = _frame_numbers([p.name for p in files])
+    numbers = frame_numbers_in_names([p.name for p in files])
     if frame_from == "name_number" or (frame_from == "auto" and numbers is not None):
         if numbers is None:
             bad = next((p.name for p in files if not _NUMBER.search(p.stem)), None)

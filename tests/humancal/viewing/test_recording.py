@@ -62,11 +62,11 @@ def recorded(body_model, tmp_path_factory):
     summary = record_capture(view, recording)
     recording.flush()
     recording.disconnect()
-    return scene, names, summary, path
+    return scene, names, summary, path, view
 
 
 def test_every_camera_person_mesh_and_view_is_in_the_file(recorded):
-    scene, names, summary, path = recorded
+    scene, names, summary, path, _ = recorded
     entities = _entities(path)
     people = sorted(scene.poses3d["person_id"].unique())
     frames = scene.poses3d["frame"].nunique()
@@ -88,7 +88,7 @@ def test_every_camera_person_mesh_and_view_is_in_the_file(recorded):
 
 def test_the_fit_of_the_truth_sits_on_the_detections(recorded):
     """The error plot's figure: the true keypoints reprojected are the detections' noise away (a few px)."""
-    scene, names, summary, path = recorded
+    scene, names, summary, path, _ = recorded
     from humancal.viewing.reprojection import detection_people, reprojected_fit
 
     motions = FittedMotions.from_table(scene.motions, scene.config.fps)
@@ -119,7 +119,7 @@ def test_overlays_draw_every_frame_of_every_view_in_the_people_colours(recorded,
     from humancal.viewing import person_colour
     from humancal.viewing.overlays import write_overlays
 
-    scene, names, _, _ = recorded
+    scene, names, _, _, _ = recorded
     motions = FittedMotions.from_table(scene.motions, scene.config.fps)
     keypoints = {int(p): (motions.frames[motions.present[i]], motions.keypoints_world_m[i, motions.present[i]])
                  for i, p in enumerate(motions.person_ids)}
@@ -147,3 +147,26 @@ def test_overlays_draw_every_frame_of_every_view_in_the_people_colours(recorded,
     assert not list((tmp_path / "overlays").glob(".*partial*"))
     with pytest.raises(ValueError, match="no final cameras"):
         write_overlays(CaptureView("v", names, {}, 30.0), tmp_path / "none")
+
+
+def test_the_footage_is_in_each_camera_of_the_recording(recorded, tmp_path):
+    import dataclasses
+
+    from humancal.viewing.footage import open_footage, write_footage
+
+    scene, names, _, _, view = recorded
+    frames = sorted(scene.detections["frame"].unique())
+    paths = write_footage(names, view.cameras["final"], view.meshes, view.faces, frames, view.fps, tmp_path / "footage")
+    with_footage = dataclasses.replace(view, meshes={}, footage=[open_footage(paths[0]), None, open_footage(paths[2])])
+    path = tmp_path / "footage.rrd"
+    recording = rr.RecordingStream("humancal_test", recording_id="footage")
+    recording.save(str(path))
+    summary = record_capture(with_footage, recording, image_every=2)
+    recording.flush()
+    recording.disconnect()
+    entities = _entities(path)
+    for name in (names[0], names[2]):
+        rows, columns = entities[f"/world/cameras/final/{name}/image"]
+        assert rows == len(frames[::2]) and "EncodedImage:blob" in columns
+    assert f"/world/cameras/final/{names[1]}/image" not in entities  # a view without footage has no images
+    assert summary.entities[f"world/cameras/final/{names[0]}/image"] == len(frames[::2])

@@ -1,0 +1,160 @@
+"""Footage: rendered for a synthetic scene (the people's silhouettes where their detections are), read back by frame
+number from videos and image folders, checked against a view's image size; overlays drawn on it land on the
+detections, measured on the written video frames."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from humancal.camera import Camera, cameras_from_table
+from humancal.fitting import FittedMotions
+from humancal.formats import FormatError
+from humancal.keypoints import JOINT_INDEX
+from humancal.synthetic import generate_scene, preset
+from humancal.viewing import CaptureView, person_colour
+from humancal.viewing.footage import (
+    BACKGROUND_BGR,
+    FootageReader,
+    check_footage,
+    footage_for_views,
+    open_footage,
+    write_footage,
+)
+from humancal.viewing.overlays import distance_to_colour, write_overlays
+from humancal.viewing.reprojection import detection_people, reprojected_fit
+
+_TORSO = [JOINT_INDEX[name] for name in ("left_hip", "right_hip", "left_shoulder", "right_shoulder")]
+
+
+@pytest.fixture(scope="module")
+def filmed(body_model, tmp_path_factory):
+    """A small synthetic scene, its true bodies' meshes and the footage rendered of them."""
+    scene = generate_scene(preset("tiny", num_frames=10, num_people=2, num_views=3, seed=5), body_model, sequence="f")
+    motions = FittedMotions.from_table(scene.motions, scene.config.fps)
+    meshes, keypoints = {}, {}
+    for index, person_id in enumerate(motions.person_ids):
+        present = motions.present[index]
+        with torch.no_grad():
+            vertices = body_model.reference_forward(
+                torch.as_tensor(motions.phenotypes[index : index + 1], dtype=body_model.dtype),
+                torch.as_tensor(motions.bone_rotmats_local[index, present][None], dtype=body_model.dtype),
+                torch.as_tensor(motions.root_translation_m[index, present][None], dtype=body_model.dtype),
+            )["vertices"][0].numpy()
+        meshes[int(person_id)] = (motions.frames[present], vertices)
+        keypoints[int(person_id)] = (motions.frames[present], motions.keypoints_world_m[index, present])
+    cameras = cameras_from_table(scene.cameras)
+    names = [f"cam{v}" for v in range(len(cameras))]
+    folder = tmp_path_factory.mktemp("footage")
+    paths = write_footage(names, cameras, meshes, body_model.faces.numpy(), list(range(scene.config.num_frames)),
+                          scene.config.fps, folder)
+    return scene, cameras, names, keypoints, folder, paths
+
+
+def _covered(image: np.ndarray, points_px: np.ndarray) -> np.ndarray:
+    """Whether each point falls on a silhouette (not the background) of a rendered frame."""
+    x, y = np.round(points_px).astype(int).T
+    inside = (x >= 0) & (y >= 0) & (x < image.shape[1]) & (y < image.shape[0])
+    out = np.zeros(len(points_px), bool)
+    pixels = image[y[inside], x[inside]].astype(int)
+    out[inside] = np.abs(pixels - BACKGROUND_BGR).sum(1) > 40
+    return out
+
+
+def test_rendered_footage_shows_the_people_where_their_detections_are(filmed):
+    scene, cameras, names, _, folder, paths = filmed
+    assert [p.name for p in paths] == [f"{n}.mp4" for n in names] and not list(folder.glob(".*partial*"))
+    torso = scene.detections[scene.detections["joint"].isin(["left_hip", "right_hip", "left_shoulder",
+                                                              "right_shoulder"]) & (scene.detections["score"] > 0)]
+    for v, path in enumerate(paths):
+        footage = open_footage(path)
+        assert footage.kind == "video" and footage.size_px == (cameras[v].width_px, cameras[v].height_px)
+        assert footage.num_frames == scene.config.num_frames
+        mine = torso[torso["view"] == v]
+        covered = []
+        with FootageReader(footage) as reader:
+            for frame, rows in mine.groupby("frame"):
+                covered += _covered(reader.frame(int(frame)), rows[["x_px", "y_px"]].to_numpy()).tolist()
+        assert len(covered) > 20 and np.mean(covered) > 0.9  # the torso's detections lie on the silhouettes
+        # and the background is most of the image: silhouettes, not a filled frame
+        with FootageReader(footage) as reader:
+            image = reader.frame(0)
+        assert 0.002 < (np.abs(image.astype(int) - BACKGROUND_BGR).sum(2) > 40).mean() < 0.5
+
+
+def test_overlays_on_the_footage_lie_on_the_detections_within_the_fits_error(filmed, tmp_path):
+    """Measured on the written frames: each detected joint is within the fit's reprojection error of the drawn fit
+    (plus the line's half width); a camera turned by 2 degrees moves the drawn fit off the detections."""
+    scene, cameras, names, keypoints, folder, _ = filmed
+    footage = footage_for_views([str(folder)], names)
+    assert all(f is not None for f in footage)
+    people = detection_people(scene.associations)
+
+    def measured(final_cameras) -> tuple[float, float]:
+        view = CaptureView("f", names, {"final": final_cameras}, scene.config.fps, detections=scene.detections,
+                           associations=scene.associations, keypoints_world_m=keypoints, footage=footage)
+        out = tmp_path / f"overlays{len(list(tmp_path.iterdir()))}"
+        result = write_overlays(view, out, show_detections=False, max_width_px=10_000)
+        distances, errors = [], []
+        for v, path in enumerate(result.videos):
+            mine = scene.detections[(scene.detections["view"] == v) & (scene.detections["score"] > 0)]
+            fits = reprojected_fit(keypoints, v, final_cameras[v], mine, people)
+            capture = cv2.VideoCapture(str(path))
+            for frame in result.frames:
+                ok, image = capture.read()
+                assert ok and image.shape[:2] == (cameras[v].height_px, cameras[v].width_px)
+                errors.append(fits[int(frame)].error_px)
+                for det_id, det in mine[mine["frame"] == frame].groupby("det_id"):
+                    person_id = people.get((int(frame), v, int(det_id)), -1)
+                    if person_id >= 0:
+                        distances += distance_to_colour(image, person_colour(person_id),
+                                                        det[["x_px", "y_px"]].to_numpy()).tolist()
+            capture.release()
+        return float(np.median(distances)), float(np.nanmedian(errors))
+
+    distance, error = measured(cameras)
+    assert 0.0 < error < 10.0 and distance <= error + 3.0
+    turn = cv2.Rodrigues(np.array([0.0, np.radians(2.0), 0.0]))[0]  # about the camera's own centre
+    turned = [Camera.from_center(c.K, turn @ c.R_cam_from_world, c.center_world_m, c.width_px, c.height_px)
+              for c in cameras]
+    distance_off, error_off = measured(turned)
+    assert error_off > 3 * error and distance_off > 3 * distance
+
+
+def test_image_folders_are_read_by_the_frame_number_in_their_names(tmp_path):
+    folder = tmp_path / "cam1"
+    folder.mkdir()
+    for frame in (4, 5, 7):
+        cv2.imwrite(str(folder / f"cam1_{frame:06d}.png"), np.full((30, 40, 3), frame * 10, np.uint8))
+    footage = open_footage(folder)
+    assert footage.kind == "images" and footage.size_px == (40, 30) and footage.last_frame == 7
+    with FootageReader(footage) as reader:
+        assert reader.frame(5)[0, 0, 0] == 50 and reader.frame(6) is None and reader.frame(7)[0, 0, 0] == 70
+    with FootageReader(dataclasses.replace(footage, frame_scale=2.0, frame_offset=1.0)) as reader:
+        assert reader.frame(2)[0, 0, 0] == 50  # a view on another clock: the capture's frame 2 is its frame 5
+    assert check_footage(footage, "cam1", (400, 300), 7) == []
+    assert "ends at frame 7" in check_footage(footage, "cam1", (400, 300), 9)[0]
+    with pytest.raises(ValueError, match=r"--videos: view cam1: .* 40x30 frames, but the view's image size is 300x400"):
+        check_footage(footage, "cam1", (300, 400), 7, "--videos")
+
+
+def test_footage_that_cannot_be_read_is_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such video file or image folder"):
+        open_footage(tmp_path / "missing.mp4")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FormatError, match="a folder of images"):
+        open_footage(tmp_path / "empty")
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(FormatError, match="a video file"):
+        open_footage(tmp_path / "notes.txt")
+    (tmp_path / "broken.mp4").write_bytes(b"not a video")
+    with pytest.raises(FormatError, match="a video OpenCV can decode"):
+        open_footage(tmp_path / "broken.mp4")
+    with pytest.raises(ValueError, match="--videos: expected one video file or image folder per view"):
+        footage_for_views([tmp_path / "a.mp4", tmp_path / "b.mp4"], ["c1", "c2", "c3"], "--videos")
+    with pytest.raises(ValueError, match="holds no footage named after the views"):
+        footage_for_views([tmp_path / "empty"], ["c1", "c2"], "--videos")
