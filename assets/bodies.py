@@ -17,6 +17,8 @@ from humancal.fitting import body_observations, fit_bodies
 from humancal.fitting.plot import plot_fit_reprojection, plot_fit_scene
 from humancal.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
+from humancal.viewing.pictures import plot_reprojection_errors
+from humancal.viewing.reprojection import fitted_keypoints
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
 from resources.io_managers import checkpoint_content_version
@@ -81,6 +83,10 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
                                          "fitted meshes reprojected over the detections"),
             "scene": png_metadata(plot_fit_scene(body, result.motions, refined, Path(tmp) / "scene.png"),
                                   "the fitted people and the cameras in 3D"),
+            "errors_per_view": png_metadata(plot_reprojection_errors(
+                fitted_keypoints(result.motions), refined.to_cameras(), detections, associations,
+                [f"view {v}" for v in range(len(refined))], Path(tmp) / "errors.png"),
+                "per-view reprojection error over time"),
         }
     context.log.info(f"{sequence}: {result.motions.num_people} bodies fitted in {result.stage_seconds['total']:.1f} s, "
                      f"reprojection {result.reprojection_error_px:.2f} px")

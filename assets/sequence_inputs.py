@@ -1,13 +1,17 @@
 """Per sequence: the raw inputs and the ground truth, loaded or generated in one step."""
 
 
+import tempfile
+from pathlib import Path
+
 import dagster as dg
 
 from assets.checks import check_result
-from assets.common import UPDATE_CONDITION, table_metadata, table_output
+from assets.common import UPDATE_CONDITION, png_metadata, table_metadata, table_output
 from assets.partitions import SEQUENCES
 from humancal.inputs import load_sequence_inputs
 from humancal.validation import check_cameras_valid, check_detections_plausible
+from humancal.viewing.pictures import plot_detections_over_time
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
 
@@ -25,6 +29,15 @@ _OUTPUTS = {
                                             "evaluation only)."),
 }
 CODE_VERSION = "2"
+
+
+def _detections_notes(inputs) -> dict:
+    """The raw detections' metadata: the loader's notes and the picture of who each view saw over time."""
+    names = inputs.views.sort_values("view")["name"].astype(str).tolist()
+    with tempfile.TemporaryDirectory() as tmp:
+        picture = png_metadata(plot_detections_over_time(inputs.detections, names, Path(tmp) / "detections.png"),
+                               "people detected per view over time")
+    return {**inputs.detections_notes, "picture": picture}
 
 
 @dg.multi_asset(
@@ -59,7 +72,7 @@ def sequence_inputs(context: dg.AssetExecutionContext, body_model: BodyModelReso
     for name in sorted(key.path[-1] for key in context.selected_asset_keys):
         table, attr, _ = _OUTPUTS[name]
         df = getattr(inputs, attr)
-        notes = inputs.detections_notes if name == "raw_detections" else {}
+        notes = _detections_notes(inputs) if name == "raw_detections" else {}
         yield table_output(df, table, output_name=name, rows=len(df), **notes)
     selected_checks = {key.name for key in context.selected_asset_check_keys}
     if "detections_plausible" in selected_checks:

@@ -62,6 +62,7 @@ def capture_view(partition: str, *, meshes: bool = True, videos: list[str] | Non
     from humancal.camera import cameras_from_table
     from humancal.fitting import FittedMotions
     from humancal.viewing import CaptureView
+    from humancal.viewing.reprojection import fitted_keypoints
     from pipelines.motions_export import _sequence_fps
 
     views = stored_table("views", partition)
@@ -77,9 +78,7 @@ def capture_view(partition: str, *, meshes: bool = True, videos: list[str] | Non
     keypoints, vertices, faces = {}, {}, None
     if fitted is not None and len(fitted):
         motions = FittedMotions.from_table(fitted, fps)
-        for index, person_id in enumerate(motions.person_ids):
-            present = motions.present[index]
-            keypoints[int(person_id)] = (motions.frames[present], motions.keypoints_world_m[index, present])
+        keypoints = fitted_keypoints(motions)
         if meshes:
             vertices, faces = _meshes(motions)
     names = views["name"].tolist()

@@ -56,7 +56,8 @@ def plot_association(
 ) -> Path:
     """Draw who is who: a timeline of the person ids and one frame of the views.
 
-    Top: every detection as a dot at (frame, person id), coloured by id; the detections rejected as false
+    Top: who is seen by which view when: each person id is a band of one thin row per view (view 0 on top), a mark
+    where that view has a detection of the person at that frame, coloured by id; the detections rejected as false
     positives on their own row (``-1``, grey crosses). Below: one panel per view (at most ``max_views``, those
     with the most detections in the frame), the image's size as a blank canvas, the 2D detections of the frame
     as thin lines (coloured by their id; rejected ones grey, dashed) and every person's 3D skeleton of the frame
@@ -100,18 +101,21 @@ def plot_association(
 
     ax = fig.add_subplot(grid[0, :])
     person = result.person_id
-    # one mark per (frame, id): the views of a frame would only draw over each other
+    # a person's band: one row per view (view 0 on top), one mark per (frame, id, view)
+    row_of_view = ((len(rig) - 1) / 2 - np.arange(len(rig))) * (0.7 / len(rig))
+    seen = np.unique(np.stack([result.frame, person, result.view], axis=1), axis=0)
+    for p in np.unique(seen[seen[:, 1] >= 0, 1]):
+        mine = seen[seen[:, 1] == p]
+        ax.scatter(mine[:, 0], p + row_of_view[mine[:, 2]], s=max(2.0, 12.0 / len(rig)),
+                   color=_colour(int(p), colours), marker="s", linewidths=0)
     marks = np.unique(np.stack([result.frame, person], axis=1), axis=0)
-    for p in np.unique(marks[marks[:, 1] >= 0, 1]):
-        frames = marks[marks[:, 1] == p, 0]
-        ax.scatter(frames, np.full(len(frames), p), s=9, color=_colour(int(p), colours), marker="s", linewidths=0)
     rejected = person < 0
     frames = marks[marks[:, 1] < 0, 0]
     ax.scatter(frames, np.full(len(frames), -1), s=10, color=_REJECTED_COLOUR, marker="x", linewidths=0.8,
                label=f"rejected ({int(rejected.sum())} detections)")
     ax.axvline(frame, color="k", linestyle=":", linewidth=1, label=f"frame {frame} (below)")
     ax.set_xlabel("frame")
-    ax.set_ylabel("person id")
+    ax.set_ylabel("person id\n(a row per view)")
     ax.set_yticks(np.arange(-1, max(result.num_people, 1)))
     ax.set_ylim(-1.7, max(result.num_people, 1) - 0.3)
     ax.grid(True, axis="x", alpha=0.3)

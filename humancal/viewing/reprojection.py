@@ -11,12 +11,19 @@ import pandas as pd
 from humancal.camera import Camera, project_points
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
 
-__all__ = ["FrameFit", "detection_people", "joint_index", "reprojected_fit"]
+__all__ = ["FrameFit", "detection_people", "fitted_keypoints", "joint_index", "reprojected_fit"]
 
 
 def joint_index(joints: pd.Series) -> np.ndarray:
     """(N,) canonical joint indices of a table's ``joint`` column (names, as the tables store them)."""
     return joints.map(JOINT_INDEX).to_numpy(dtype=np.int64)
+
+
+def fitted_keypoints(motions) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """person id -> ((T,) frames where present, (T, 23, 3) keypoints, world metres) of a
+    :class:`humancal.fitting.FittedMotions`."""
+    return {int(person_id): (motions.frames[motions.present[i]], motions.keypoints_world_m[i, motions.present[i]])
+            for i, person_id in enumerate(motions.person_ids)}
 
 
 def detection_people(associations: pd.DataFrame | None) -> dict[tuple[int, int, int], int]:
