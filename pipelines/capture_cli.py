@@ -164,9 +164,9 @@ def cmd_add(args: argparse.Namespace) -> int:
 
 def register_capture_partition(key: str) -> None:
     """Add ``key`` to the sequences partitions of the CLI's Dagster instance."""
-    from pipelines.cli import _instance
+    from pipelines.instance import persistent_instance
     from pipelines.partitions import SEQUENCES
 
-    instance = _instance()
+    instance = persistent_instance()
     if key not in set(instance.get_dynamic_partitions(SEQUENCES.name)):
         instance.add_dynamic_partitions(SEQUENCES.name, [key])

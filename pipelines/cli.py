@@ -35,36 +35,14 @@ import signal
 import sys
 from pathlib import Path
 
+from pipelines.instance import dagster_home, persistent_instance
+
 DEMO_PARTITION = "synthetic__demo"
 SHARED_METRIC_TABLES = {"cmu_mocap__held_out_02_14": "lifter_heldout_metrics"}
 """Metric tables of unpartitioned assets, by the name ``report --partition`` knows them under."""
 QUIET_RUN_CONFIG = {"loggers": {"console": {"config": {"log_level": "INFO"}}}}
-
-
-def dagster_home() -> Path:
-    """The persistent DAGSTER_HOME of this checkout (created with telemetry disabled)."""
-    from humancal.settings import state_dir
-
-    home = state_dir() / "dagster_home"
-    home.mkdir(parents=True, exist_ok=True)
-    config = home / "dagster.yaml"
-    if not config.exists():
-        config.write_text("telemetry:\n  enabled: false\n")
-    return home
-
-
-def _instance():
-    """The persistent instance; runs left unfinished by a killed ``humancal`` process are marked failed first
-    (``pipelines.run_guard``)."""
-    os.environ["DAGSTER_HOME"] = str(dagster_home())
-    import dagster as dg
-
-    from pipelines.run_guard import fail_dead_runs
-
-    instance = dg.DagsterInstance.get()
-    for line in fail_dead_runs(instance):
-        print(f"humancal: {line}", file=sys.stderr)
-    return instance
+_instance = persistent_instance
+"""The persistent instance (the name the command modules call through ``cli``, so that tests can replace it)."""
 
 
 def register_partitions(instance, defs) -> list[str]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 
-from pipelines.export_command import check_out, stored_table
+from pipelines.export_io import check_out, stored_table
 
 CAMERA_KINDS = {"final": "final_cameras", "calibrated": "extrinsics", "refined": "refined_cameras",
                 "reference": "gt_cameras"}

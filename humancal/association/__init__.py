@@ -22,10 +22,10 @@ from humancal.association.cycle_matching import (
 )
 from humancal.association.detection_geometry import DetectionGeometry, detection_geometry
 from humancal.association.track_smoothing import SmoothingConfig, smooth_tracks
+from humancal.association.tracking_config import TrackingConfig
 from humancal.association.tracking import (
     SKELETONS3D_SCHEMA,
     AssociationResult,
-    TrackingConfig,
     associate,
     to_associations_table,
     to_skeletons_table,

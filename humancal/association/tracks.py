@@ -16,15 +16,11 @@ from __future__ import annotations
 
 import logging
 import warnings
-from typing import TYPE_CHECKING
-
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from humancal.association.tracking_config import TrackingConfig
 from humancal.keypoints import JOINT_INDEX, LIMB_INDEX
-
-if TYPE_CHECKING:
-    from humancal.association.tracking import TrackingConfig
 
 __all__ = ["build_tracks", "keep_tracks"]
 

@@ -4,6 +4,15 @@
 applies the best one to the source directly, batched over many point sets with per-point weights (a weight of 0
 leaves a point, even a NaN one, out of the fit). ``rigid_residual_rms_m`` gives only the residual of the best rigid
 motion, for very many small point sets at once (closed form, no decomposition per set).
+
+Example: the similarity between a square and the same square doubled and moved:
+
+    >>> import numpy as np
+    >>> from humancal.geometry.alignment import fit_similarity
+    >>> square = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    >>> found = fit_similarity(square, 2.0 * square + [0.0, 0.0, 3.0])
+    >>> round(found.scale, 6), found.t.round(6).tolist(), np.allclose(found.R, np.eye(3))
+    (2.0, [0.0, 0.0, 3.0], True)
 """
 
 from __future__ import annotations

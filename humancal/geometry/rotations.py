@@ -7,6 +7,15 @@ torch); a tensor in, a tensor out (differentiable, its dtype and device kept).
 Representations (``docs/conventions.md``): rotation matrices ``(..., 3, 3)`` inside the library; rotation
 vectors (axis times angle, radians) ``(..., 3)`` at file boundaries; the 6D form is the first two columns of the
 matrix, ``(..., 3, 2)``.
+
+Example:
+    >>> import numpy as np
+    >>> from humancal.geometry.rotations import rotation_angle_deg, rotmat_to_rotvec, rotvec_to_rotmat
+    >>> R = rotvec_to_rotmat(np.array([0.0, 0.0, np.pi / 2]))  # a quarter turn about z
+    >>> (R @ [1.0, 0.0, 0.0]).round(6).tolist()
+    [0.0, 1.0, 0.0]
+    >>> float(rotation_angle_deg(R).round(6)), rotmat_to_rotvec(R).round(6).tolist()
+    (90.0, [0.0, 0.0, 1.570796])
 """
 
 from __future__ import annotations

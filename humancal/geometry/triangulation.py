@@ -4,6 +4,22 @@ The linear (DLT) solution is computed in normalized image coordinates (pixels ma
 K^-1), where the rows of the homogeneous system are well conditioned, and each view's rows are
 weighted by the detection confidence. One optional robust pass drops, per point, the views whose
 reprojection error exceeds a threshold and solves again.
+
+Example: two cameras 90 degrees apart place a point exactly from its two pixels:
+
+    >>> import numpy as np
+    >>> from humancal.camera import Camera, project_points
+    >>> from humancal.geometry.triangulation import triangulate_dlt
+    >>> K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+    >>> front = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])   # looking along +y
+    >>> side = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])   # looking along -x
+    >>> cameras = [Camera.from_center(K, front, [0.0, -4.0, 1.0], 640, 480),
+    ...            Camera.from_center(K, side, [4.0, 0.0, 1.0], 640, 480)]
+    >>> point = np.array([[0.2, 0.1, 1.5]])
+    >>> pixels = np.stack([project_points(c, point)[0] for c in cameras])   # (views, points, 2)
+    >>> points, views = triangulate_dlt(cameras, pixels, np.ones((2, 1)))
+    >>> points.round(6).tolist(), views.tolist()
+    ([[0.2, 0.1, 1.5]], [2])
 """
 
 from __future__ import annotations

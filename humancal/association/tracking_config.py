@@ -1,0 +1,97 @@
+"""The settings of the association and tracking (:func:`humancal.association.associate`), apart from the code that
+reads them, so that its stages (:mod:`~humancal.association.tracks`, ...) can name the type without importing the
+conductor."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from humancal.association.affinity import AffinityConfig
+from humancal.association.cycle_matching import MatchingConfig
+from humancal.association.track_smoothing import SmoothingConfig
+
+__all__ = ["TrackingConfig"]
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Settings of :func:`associate` (defaults chosen on synthetic scenes, ``docs/association.md``).
+
+    Attributes:
+        affinity: the affinity's weights and scales.
+        matching: the matching's solver settings (its ``match_threshold`` is replaced by ``match_threshold``).
+        match_threshold: affinity a pair must exceed to gain from being matched, in [0, 1].
+        temporal: whether the temporal term (detections against the previous frame's tracks) is used.
+        fps: frame rate of the sequence, frames per second (turns the durations below into frames).
+        reid_window_s: how long a lost track waits to be re-identified, seconds (>= 0); later it is closed and a
+            returning person starts a new track.
+        assign_distance_m: largest median 3D joint distance between a cluster's skeleton and a track's
+            predicted skeleton one frame later for the cluster to continue the track, metres.
+        reid_speed_mps: after a gap the distance allowed grows by this speed times the gap, metres per second.
+        bone_tolerance: after a gap, the median relative difference of the body's bone lengths (arms, legs,
+            shoulder and hip widths, torso sides) between a cluster and a track must stay below it (> 0).
+        min_views: views a cluster needs to start a track (>= 2).
+        min_track_s: a track observed for less than this is rejected as a false positive, seconds (>= 0).
+        stitch_window_s: when ``num_people`` is not given, a track that starts at most this long after another
+            one ended continues it when the two share bone lengths and one could walk to the other (0: never).
+        outlier_threshold_px: triangulation drops, per joint, the views that reproject farther than this, pixels.
+        merge_distance_m: two clusters of one frame from different views are one person split in two, and are
+            merged, when their skeletons' median joint distance is below this and the larger one reprojects onto
+            every detection of the smaller one within ``outlier_threshold_px`` (median over the joints), metres
+            (0: never merged).
+        complete_clusters: whether a detection no cluster took joins the one cluster of its frame that lacks its
+            view and reprojects onto it within ``outlier_threshold_px`` (left and right swapped or not).
+        num_people: the number of people if known (at most this many ids are kept), or None to estimate it.
+        smoothing: the temporal refinement of the tracked skeletons (``smoothing.enabled`` False: the
+            frame-by-frame triangulation as it is).
+    """
+
+    affinity: AffinityConfig = field(default_factory=AffinityConfig)
+    matching: MatchingConfig = field(default_factory=MatchingConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
+    match_threshold: float = 0.3
+    temporal: bool = True
+    fps: float = 30.0
+    reid_window_s: float = 3.0
+    assign_distance_m: float = 0.75
+    reid_speed_mps: float = 1.5
+    bone_tolerance: float = 0.2
+    min_views: int = 2
+    min_track_s: float = 0.3
+    stitch_window_s: float = 20.0
+    outlier_threshold_px: float = 25.0
+    merge_distance_m: float = 0.4
+    complete_clusters: bool = True
+    num_people: int | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.affinity, AffinityConfig):
+            raise ValueError(f"TrackingConfig.affinity must be an AffinityConfig, got {type(self.affinity).__name__}")
+        if not isinstance(self.matching, MatchingConfig):
+            raise ValueError(f"TrackingConfig.matching must be a MatchingConfig, got {type(self.matching).__name__}")
+        if not isinstance(self.smoothing, SmoothingConfig):
+            raise ValueError(f"TrackingConfig.smoothing must be a SmoothingConfig, got {type(self.smoothing).__name__}")
+        if not 0.0 <= self.match_threshold <= 1.0:
+            raise ValueError(f"TrackingConfig.match_threshold must lie in [0, 1], got {self.match_threshold}")
+        for name in ("fps", "assign_distance_m", "bone_tolerance", "outlier_threshold_px"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"TrackingConfig.{name} must be a positive number, got {value}")
+        for name in ("reid_window_s", "reid_speed_mps", "min_track_s", "stitch_window_s", "merge_distance_m"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"TrackingConfig.{name} must be a number >= 0, got {value}")
+        if isinstance(self.min_views, bool) or not isinstance(self.min_views, (int, np.integer)) or self.min_views < 2:
+            raise ValueError(f"TrackingConfig.min_views must be an integer >= 2, got {self.min_views}")
+        if self.num_people is not None and (isinstance(self.num_people, bool)
+                                            or not isinstance(self.num_people, (int, np.integer))
+                                            or self.num_people < 1):
+            raise ValueError(f"TrackingConfig.num_people must be None (estimate it) or an integer >= 1, "
+                             f"got {self.num_people}")
+
+    @property
+    def matching_config(self) -> MatchingConfig:
+        """The matching settings with this config's ``match_threshold``."""
+        return replace(self.matching, match_threshold=self.match_threshold)
