@@ -20,7 +20,7 @@ from humancal.calibration import (
     plot_rigs,
 )
 from humancal.camera import cameras_by_view, cameras_to_table, pinhole
-from humancal.capture_cameras import undistort_known_views
+from humancal.captures.cameras import undistort_known_views
 from humancal.inputs import sequence_principal_points
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter

@@ -21,6 +21,12 @@ from pathlib import Path
 
 DEFAULT_SEQUENCE = "capture"
 """The sequence half of a capture's partition key unless ``--sequence`` names another."""
+FLAGS = {"image_size": "--image-size", "skeleton": "--skeleton", "cameras_format": "--cameras-format",
+         "known_views": "--known-views", "reference_cameras_format": "--reference-cameras-format",
+         "drop_views": "--drop-view", "fps": "--fps", "view_fps": "--fps", "unsynced": "--unsynced",
+         "time_offsets": "--time-offsets", "videos": "--videos"}
+"""How the messages of the capture checks name the options: by their flags (``views``: ``--openpose`` or
+``--coco``, as given)."""
 
 
 def add_parser(subparsers) -> None:
@@ -83,7 +89,7 @@ def cmd_add(args: argparse.Namespace) -> int:
     """Validate the capture, write it into the user datasets file, register its partition, print a summary."""
     import dataclasses
 
-    from humancal.capture_options import parse_named_numbers
+    from humancal.captures.options import parse_named_numbers
     from humancal.captures import CaptureConfig, load_capture, parse_image_size, parse_principal_point
     from humancal.sequences import (
         DatasetsConfigError,
@@ -141,11 +147,7 @@ def cmd_add(args: argparse.Namespace) -> int:
     key = partition_key(args.name, args.sequence)
     if key in load_datasets_config():  # the cheap check first; add_user_sequence checks again before writing
         raise DatasetsConfigError(f"partition {key} exists; choose another NAME or --sequence")
-    flags = {"views": "--openpose" if args.openpose else "--coco", "image_size": "--image-size",
-             "skeleton": "--skeleton", "cameras_format": "--cameras-format", "known_views": "--known-views",
-             "reference_cameras_format": "--reference-cameras-format", "drop_views": "--drop-view",
-             "fps": "--fps", "view_fps": "--fps", "unsynced": "--unsynced", "time_offsets": "--time-offsets",
-             "videos": "--videos"}
+    flags = {**FLAGS, "views": "--openpose" if args.openpose else "--coco"}
     capture = load_capture(config, args.sequence, option_names=flags)
     sync = capture.summary.sync
     if config.unsynced and sync is not None:

@@ -1,7 +1,7 @@
 """The capture inbox: drop a capture folder into ``<state dir>/inbox/`` and a sensor registers and calibrates it.
 
 A drop is a folder ``<inbox>/<NAME>/`` holding the detections (one sub-folder of OpenPose JSON per view, or one
-COCO-style keypoint JSON file per view) and, written last, ``capture.yaml`` (``humancal.capture_folder.read_capture_folder``)::
+COCO-style keypoint JSON file per view) and, written last, ``capture.yaml`` (``humancal.captures.folder.read_capture_folder``)::
 
     format: openpose
     image_size: [1920, 1080]
@@ -40,7 +40,7 @@ def inbox_dir() -> Path:
 
 
 def _fingerprint(drop: Path) -> str:
-    from humancal.capture_folder import CAPTURE_FILE
+    from humancal.captures.folder import CAPTURE_FILE
 
     stat = (drop / CAPTURE_FILE).stat()
     files = sum(len(names) for _, _, names in os.walk(drop))
@@ -54,7 +54,7 @@ def register_drop(drop: Path, user_datasets: Path | None = None) -> str:
         ValueError, FileNotFoundError: the drop is invalid (the message names the file and field), or its name is
             taken; nothing is written then.
     """
-    from humancal.capture_folder import read_capture_folder
+    from humancal.captures.folder import read_capture_folder
     from humancal.captures import load_capture
     from humancal.sequences import add_user_sequence, load_datasets_config, partition_key
 
@@ -87,7 +87,7 @@ def build_capture_inbox_sensor(
         description="Registers capture folders dropped into the inbox (<state dir>/inbox) and calibrates them.",
     )
     def capture_inbox(context: dg.SensorEvaluationContext) -> dg.SensorResult:
-        from humancal.capture_folder import CAPTURE_FILE
+        from humancal.captures.folder import CAPTURE_FILE
 
         folder = inbox or inbox_dir()
         seen = json.loads(context.cursor) if context.cursor else {}

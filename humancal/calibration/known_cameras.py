@@ -10,7 +10,7 @@
   their intrinsics and poses, and the world is theirs.
 
 The known cameras come as pinholes: their lens distortion is taken out of the detections before the method sees
-them (:func:`humancal.capture_cameras.undistort_known_views`).
+them (:func:`humancal.captures.cameras.undistort_known_views`).
 """
 
 from __future__ import annotations

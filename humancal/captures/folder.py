@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from humancal.captures import CaptureConfig
+from humancal.captures.config import CaptureConfig
 from humancal.formats import FormatError
 
 __all__ = ["CAPTURE_FILE", "read_capture_folder"]
