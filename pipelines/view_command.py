@@ -87,30 +87,14 @@ def capture_view(partition: str, *, meshes: bool = True, videos: list[str] | Non
                        vertices, faces, _footage(partition, names, videos))
 
 
-def _meshes(motions, chunk: int = 64):
-    """person id -> ((T,) frames, (T, V, 3) anny vertices), and the faces."""
-    import numpy as np
-    import torch
-
+def _meshes(motions):
+    """person id -> ((T,) frames, (T, V, 3) anny vertices), and the faces (:func:`humancal.viewing.mesh.fitted_meshes`)."""
     from humancal.body import BodyModel
+    from humancal.viewing.mesh import fitted_meshes
     from pipelines.quiet_warp import init_warp_quietly
 
     init_warp_quietly()
-    body = BodyModel()
-    out = {}
-    for index, person_id in enumerate(motions.person_ids):
-        present = np.flatnonzero(motions.present[index])
-        phenotypes = torch.as_tensor(motions.phenotypes[index : index + 1], dtype=body.dtype)
-        parts = []
-        for start in range(0, len(present), chunk):
-            frames = present[start : start + chunk]
-            with torch.no_grad():
-                parts.append(body.reference_forward(
-                    phenotypes, torch.as_tensor(motions.bone_rotmats_local[index, frames][None], dtype=body.dtype),
-                    torch.as_tensor(motions.root_translation_m[index, frames][None], dtype=body.dtype),
-                )["vertices"][0].cpu().float().numpy())
-        out[int(person_id)] = (motions.frames[present], np.concatenate(parts) if parts else np.zeros((0, 0, 3)))
-    return out, body.faces.cpu().numpy()
+    return fitted_meshes(BodyModel(), motions)
 
 
 def export_overlays(args) -> int:

@@ -1,10 +1,39 @@
-"""A lighter mesh for viewing: vertex clustering on a grid, computed once per person and applied to every frame."""
+"""The fitted bodies' meshes for viewing (:func:`fitted_meshes`), and a lighter mesh: vertex clustering on a grid,
+computed once per person and applied to every frame (:func:`decimation`)."""
 
 from __future__ import annotations
 
 import numpy as np
+import torch
 
-__all__ = ["decimation"]
+__all__ = ["decimation", "fitted_meshes"]
+
+
+def fitted_meshes(body, motions, chunk: int = 64) -> tuple[dict[int, tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """Every person's anny mesh at every frame where present.
+
+    Args:
+        body: the :class:`humancal.body.BodyModel`.
+        motions: a :class:`humancal.fitting.FittedMotions` (fitted, or a synthetic scene's true ones).
+        chunk: frames per forward pass (memory).
+
+    Returns:
+        person id -> ((T,) frames, (T, V, 3) vertices, world metres), and the (F, 3) triangles.
+    """
+    out = {}
+    for index, person_id in enumerate(motions.person_ids):
+        present = np.flatnonzero(motions.present[index])
+        phenotypes = torch.as_tensor(motions.phenotypes[index : index + 1], dtype=body.dtype)
+        parts = []
+        for start in range(0, len(present), chunk):
+            frames = present[start : start + chunk]
+            with torch.no_grad():
+                parts.append(body.reference_forward(
+                    phenotypes, torch.as_tensor(motions.bone_rotmats_local[index, frames][None], dtype=body.dtype),
+                    torch.as_tensor(motions.root_translation_m[index, frames][None], dtype=body.dtype),
+                )["vertices"][0].cpu().float().numpy())
+        out[int(person_id)] = (motions.frames[present], np.concatenate(parts) if parts else np.zeros((0, 0, 3)))
+    return out, body.faces.cpu().numpy()
 
 
 def decimation(vertices_m: np.ndarray, faces: np.ndarray, cell_m: float = 0.03) -> tuple[np.ndarray, np.ndarray]:

@@ -552,6 +552,11 @@ def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state
     recording = tmp_path / "capture.rrd"
     assert main(["view", "--partition", "oplab__capture", "--no-mesh", "--save", str(recording)]) == 0
     assert "footage: 20 images" in capsys.readouterr().out and recording.stat().st_size > 0
+    with pytest.raises(SystemExit, match="no true body motions .* a capture brings its own"):
+        main(["export", "footage", "--partition", "oplab__capture", "--format", "mp4", "--out", str(tmp_path / "f")])
+    with pytest.raises(SystemExit, match="--videos is an option of `export overlays`"):
+        main(["export", "cameras", "--partition", "oplab__capture", "--format", "pose2sim", "--videos", "x",
+              "--out", str(tmp_path / "c.toml")])
 
 
 @pytest.mark.slow

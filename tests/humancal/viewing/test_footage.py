@@ -9,7 +9,6 @@ import dataclasses
 import cv2
 import numpy as np
 import pytest
-import torch
 
 from humancal.camera import Camera, cameras_from_table
 from humancal.fitting import FittedMotions
@@ -26,7 +25,8 @@ from humancal.viewing.footage import (
     write_footage,
 )
 from humancal.viewing.overlays import distance_to_colour, write_overlays
-from humancal.viewing.reprojection import detection_people, reprojected_fit
+from humancal.viewing.mesh import fitted_meshes
+from humancal.viewing.reprojection import detection_people, fitted_keypoints, reprojected_fit
 
 _TORSO = [JOINT_INDEX[name] for name in ("left_hip", "right_hip", "left_shoulder", "right_shoulder")]
 
@@ -36,22 +36,13 @@ def filmed(body_model, tmp_path_factory):
     """A small synthetic scene, its true bodies' meshes and the footage rendered of them."""
     scene = generate_scene(preset("tiny", num_frames=10, num_people=2, num_views=3, seed=5), body_model, sequence="f")
     motions = FittedMotions.from_table(scene.motions, scene.config.fps)
-    meshes, keypoints = {}, {}
-    for index, person_id in enumerate(motions.person_ids):
-        present = motions.present[index]
-        with torch.no_grad():
-            vertices = body_model.reference_forward(
-                torch.as_tensor(motions.phenotypes[index : index + 1], dtype=body_model.dtype),
-                torch.as_tensor(motions.bone_rotmats_local[index, present][None], dtype=body_model.dtype),
-                torch.as_tensor(motions.root_translation_m[index, present][None], dtype=body_model.dtype),
-            )["vertices"][0].numpy()
-        meshes[int(person_id)] = (motions.frames[present], vertices)
-        keypoints[int(person_id)] = (motions.frames[present], motions.keypoints_world_m[index, present])
+    meshes, faces = fitted_meshes(body_model, motions)
+    keypoints = fitted_keypoints(motions)
     cameras = cameras_from_table(scene.cameras)
     names = [f"cam{v}" for v in range(len(cameras))]
     folder = tmp_path_factory.mktemp("footage")
-    paths = write_footage(names, cameras, meshes, body_model.faces.numpy(), list(range(scene.config.num_frames)),
-                          scene.config.fps, folder)
+    paths = write_footage(names, cameras, meshes, faces, list(range(scene.config.num_frames)), scene.config.fps,
+                          folder)
     return scene, cameras, names, keypoints, folder, paths
 
 

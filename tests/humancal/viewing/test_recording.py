@@ -12,12 +12,13 @@ from collections import Counter
 import numpy as np
 import pytest
 import rerun as rr
-import torch
 
 from humancal.camera import cameras_from_table
 from humancal.fitting import FittedMotions
 from humancal.synthetic import generate_scene, preset
 from humancal.viewing import CaptureView, decimation, record_capture
+from humancal.viewing.mesh import fitted_meshes
+from humancal.viewing.reprojection import fitted_keypoints
 
 _CHUNK = re.compile(r"^Chunk\(\S+\) with (\d+) rows .* - (\S+) - data columns: \[(.*)\]$")
 
@@ -41,21 +42,10 @@ def recorded(body_model, tmp_path_factory):
     scene = generate_scene(preset("tiny", num_frames=12, num_people=2, num_views=3, seed=3), body_model, sequence="v")
     cameras = cameras_from_table(scene.cameras)
     motions = FittedMotions.from_table(scene.motions, scene.config.fps)
-    keypoints, meshes = {}, {}
-    for index, person_id in enumerate(motions.person_ids):
-        present = motions.present[index]
-        keypoints[int(person_id)] = (motions.frames[present], motions.keypoints_world_m[index, present])
-        with torch.no_grad():
-            vertices = body_model.reference_forward(
-                torch.as_tensor(motions.phenotypes[index : index + 1], dtype=body_model.dtype),
-                torch.as_tensor(motions.bone_rotmats_local[index, present][None], dtype=body_model.dtype),
-                torch.as_tensor(motions.root_translation_m[index, present][None], dtype=body_model.dtype),
-            )["vertices"][0].numpy()
-        meshes[int(person_id)] = (motions.frames[present], vertices)
+    meshes, faces = fitted_meshes(body_model, motions)
     names = [f"cam{v}" for v in range(len(cameras))]
     view = CaptureView("synthetic__v", names, {"final": cameras, "reference": cameras}, scene.config.fps,
-                       scene.poses3d, scene.detections, scene.associations, keypoints, meshes,
-                       body_model.faces.numpy())
+                       scene.poses3d, scene.detections, scene.associations, fitted_keypoints(motions), meshes, faces)
     path = tmp_path_factory.mktemp("rrd") / "capture.rrd"
     recording = rr.RecordingStream("humancal_test", recording_id="synthetic__v")
     recording.save(str(path))
