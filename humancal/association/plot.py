@@ -44,6 +44,53 @@ def _draw_pose(ax, points_px: np.ndarray, colour, **style) -> None:
         ax.plot([xa, xb], [ya, yb], color=colour, **style)
 
 
+def _draw_timeline(ax, result: AssociationResult, num_views: int, frame: int, colours, title: str | None) -> None:
+    """Who is seen by which view when: a band per person id, one row per view (view 0 on top), a mark per (frame,
+    id, view); the rejected detections on row -1; the frame drawn below marked."""
+    person = result.person_id
+    row_of_view = ((num_views - 1) / 2 - np.arange(num_views)) * (0.7 / num_views)
+    seen = np.unique(np.stack([result.frame, person, result.view], axis=1), axis=0)
+    for p in np.unique(seen[seen[:, 1] >= 0, 1]):
+        mine = seen[seen[:, 1] == p]
+        ax.scatter(mine[:, 0], p + row_of_view[mine[:, 2]], s=max(2.0, 12.0 / num_views),
+                   color=_colour(int(p), colours), marker="s", linewidths=0)
+    marks = np.unique(np.stack([result.frame, person], axis=1), axis=0)
+    rejected = person < 0
+    frames = marks[marks[:, 1] < 0, 0]
+    ax.scatter(frames, np.full(len(frames), -1), s=10, color=_REJECTED_COLOUR, marker="x", linewidths=0.8,
+               label=f"rejected ({int(rejected.sum())} detections)")
+    ax.axvline(frame, color="k", linestyle=":", linewidth=1, label=f"frame {frame} (below)")
+    ax.set_xlabel("frame")
+    ax.set_ylabel("person id\n(a row per view)")
+    ax.set_yticks(np.arange(-1, max(result.num_people, 1)))
+    ax.set_ylim(-1.7, max(result.num_people, 1) - 0.3)
+    ax.grid(True, axis="x", alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=7, frameon=False)
+    ax.set_title(title or f"{result.num_people} people; {int((~rejected).sum())} of {len(person)} detections "
+                 "associated", fontsize=10)
+
+
+def _draw_view(ax, keypoints_px: np.ndarray, persons: np.ndarray, projected_px: np.ndarray,
+               skeleton_persons: np.ndarray, size_px, colours) -> None:
+    """One view at one frame: its detections ((D, 23, 2), thin; rejected dashed) and the skeletons of the frame
+    projected ((S, 23, 2), thick, with joints and the person id), on a blank canvas of the image's size."""
+    for points, p in zip(keypoints_px, persons):
+        _draw_pose(ax, points, _colour(int(p), colours), linewidth=0.8, linestyle="--" if p < 0 else "-", alpha=0.8)
+    for points, p in zip(projected_px, skeleton_persons):
+        colour = _colour(int(p), colours)
+        _draw_pose(ax, points, colour, linewidth=2.2, alpha=0.55)
+        ax.scatter(points[:, 0], points[:, 1], s=5, color=colour)
+        seen = points[np.isfinite(points).all(1)]
+        if len(seen):
+            ax.annotate(str(int(p)), seen.mean(axis=0), color=colour, fontsize=8, fontweight="bold",
+                        xytext=(6, 0), textcoords="offset points")
+    ax.set_xlim(0, size_px[0])
+    ax.set_ylim(size_px[1], 0)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
 def plot_association(
     result: AssociationResult,
     detections: DenseDetections,
@@ -99,29 +146,8 @@ def plot_association(
     fig = plt.figure(figsize=(3.2 * _COLUMNS, 2.6 + rows * (panel_h + 0.4)))
     grid = fig.add_gridspec(1 + rows, _COLUMNS, height_ratios=[2.6] + [panel_h + 0.4] * rows)
 
-    ax = fig.add_subplot(grid[0, :])
+    _draw_timeline(fig.add_subplot(grid[0, :]), result, len(rig), frame, colours, title)
     person = result.person_id
-    # a person's band: one row per view (view 0 on top), one mark per (frame, id, view)
-    row_of_view = ((len(rig) - 1) / 2 - np.arange(len(rig))) * (0.7 / len(rig))
-    seen = np.unique(np.stack([result.frame, person, result.view], axis=1), axis=0)
-    for p in np.unique(seen[seen[:, 1] >= 0, 1]):
-        mine = seen[seen[:, 1] == p]
-        ax.scatter(mine[:, 0], p + row_of_view[mine[:, 2]], s=max(2.0, 12.0 / len(rig)),
-                   color=_colour(int(p), colours), marker="s", linewidths=0)
-    marks = np.unique(np.stack([result.frame, person], axis=1), axis=0)
-    rejected = person < 0
-    frames = marks[marks[:, 1] < 0, 0]
-    ax.scatter(frames, np.full(len(frames), -1), s=10, color=_REJECTED_COLOUR, marker="x", linewidths=0.8,
-               label=f"rejected ({int(rejected.sum())} detections)")
-    ax.axvline(frame, color="k", linestyle=":", linewidth=1, label=f"frame {frame} (below)")
-    ax.set_xlabel("frame")
-    ax.set_ylabel("person id\n(a row per view)")
-    ax.set_yticks(np.arange(-1, max(result.num_people, 1)))
-    ax.set_ylim(-1.7, max(result.num_people, 1) - 0.3)
-    ax.grid(True, axis="x", alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=7, frameon=False)
-    ax.set_title(title or f"{result.num_people} people; {int((~rejected).sum())} of {len(person)} detections "
-                 "associated", fontsize=10)
 
     skeletons = np.flatnonzero(result.skeleton_frame == frame)
     joints = result.joints_world_m[skeletons]  # (S, 23, 3)
@@ -129,25 +155,9 @@ def plot_association(
         else np.zeros((len(rig), 0, joints.shape[1] if joints.ndim == 3 else 0, 2))
     for k, v in enumerate(views):
         ax = fig.add_subplot(grid[1 + k // _COLUMNS, k % _COLUMNS])
-        w, h = rig.image_size_px[v]
-        for row in np.flatnonzero(in_frame & (result.view == v)):
-            p = int(person[row])
-            _draw_pose(ax, detections.keypoints_px[row], _colour(p, colours), linewidth=0.8,
-                       linestyle="--" if p < 0 else "-", alpha=0.8)
-        for s, skeleton in enumerate(skeletons):
-            p = int(result.skeleton_person[skeleton])
-            points = projected[v, s]
-            _draw_pose(ax, points, _colour(p, colours), linewidth=2.2, alpha=0.55)
-            ax.scatter(points[:, 0], points[:, 1], s=5, color=_colour(p, colours))
-            seen = points[np.isfinite(points).all(1)]
-            if len(seen):
-                ax.annotate(str(p), seen.mean(axis=0), color=_colour(p, colours), fontsize=8, fontweight="bold",
-                            xytext=(6, 0), textcoords="offset points")
-        ax.set_xlim(0, w)
-        ax.set_ylim(h, 0)
-        ax.set_aspect("equal")
-        ax.set_xticks([])
-        ax.set_yticks([])
+        rows = np.flatnonzero(in_frame & (result.view == v))
+        _draw_view(ax, detections.keypoints_px[rows], person[rows], projected[v],
+                   result.skeleton_person[skeletons], rig.image_size_px[v], colours)
         ax.set_title(f"view {v}: {counts[v]} detections", fontsize=8)
     fig.tight_layout()
     return save_figure(fig, path_png, dpi=80)
