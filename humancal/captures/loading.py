@@ -155,9 +155,8 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
     if skeleton is not None:
         family = OPENPOSE_SKELETONS if config.format == "openpose" else COCO_SKELETONS
         check_skeleton_fit(table, skeleton, [s for s in family if s != skeleton], names["skeleton"])
-    width = table["view"].map(lambda v: sizes[v][0]).to_numpy(float)
-    height = table["view"].map(lambda v: sizes[v][1]).to_numpy(float)
-    off = off_image(table["x_px"].to_numpy(), table["y_px"].to_numpy(), width, height)
+    off = off_image(table["x_px"].to_numpy(), table["y_px"].to_numpy(),
+                    *(table["view"].map(lambda v, i=i: sizes[v][i]).to_numpy(float) for i in (0, 1)))
     off_per_view = table.loc[off, "view"].value_counts()
     if off.any():
         log.warning("%s: dropped %d joints outside the image (per view %s)", sequence, int(off.sum()),
@@ -175,17 +174,10 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
         "sequence": sequence, "view": np.arange(V), "name": view_names,
         "width_px": [sizes[v][0] for v in range(V)], "height_px": [sizes[v][1] for v in range(V)],
     }), "views")
-    view_sizes = [tuple(sizes[v]) for v in range(V)]
-    gt_cameras = (read_capture_cameras(config.reference_cameras, config.reference_cameras_format, sequence, view_names,
-                                       view_sizes, format_option=names["reference_cameras_format"])
-                  if config.reference_cameras is not None else empty_table("cameras"))
-    known_cameras = (read_capture_cameras(config.cameras, config.cameras_format, sequence, view_names, view_sizes,
-                                          views=config.known_views, format_option=names["cameras_format"],
-                                          views_option=names["known_views"])
-                     if config.cameras is not None else empty_table("cameras"))
-    per_view = detections.groupby("view")
-    dets = per_view.apply(lambda g: g.groupby(["frame", "det_id"]).ngroups, include_groups=False)
-    frames = per_view["frame"].nunique()
+    gt_cameras, known_cameras = _capture_cameras(config, sequence, view_names, [tuple(sizes[v]) for v in range(V)],
+                                                 names)
+    frames = detections.groupby("view")["frame"].nunique()
+    dets = detections.groupby("view").apply(lambda g: g.groupby(["frame", "det_id"]).ngroups, include_groups=False)
     summary = CaptureSummary(
         names=tuple(view_names),
         frames=tuple(int(frames.get(v, 0)) for v in range(V)),
@@ -203,6 +195,20 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
     capture = Capture(detections=detections, views=views, gt_cameras=gt_cameras, summary=summary,
                       known_cameras=known_cameras)
     return _drop_views(capture, config.drop_views, names["drop_views"]) if config.drop_views else capture
+
+
+def _capture_cameras(config: CaptureConfig, sequence: str, view_names: list[str], view_sizes: list[tuple],
+                     names: Mapping[str, str]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The ``cameras`` tables of the reference cameras (evaluation only) and of the known ones (the known views
+    only); empty where the capture has none."""
+    gt_cameras = (read_capture_cameras(config.reference_cameras, config.reference_cameras_format, sequence, view_names,
+                                       view_sizes, format_option=names["reference_cameras_format"])
+                  if config.reference_cameras is not None else empty_table("cameras"))
+    known_cameras = (read_capture_cameras(config.cameras, config.cameras_format, sequence, view_names, view_sizes,
+                                          views=config.known_views, format_option=names["cameras_format"],
+                                          views_option=names["known_views"])
+                     if config.cameras is not None else empty_table("cameras"))
+    return gt_cameras, known_cameras
 
 
 def _drop_views(capture: Capture, drop: tuple[str, ...], option: str) -> Capture:
