@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-import humancal.calibration.extrinsics as extrinsics_module
+import humancal.calibration.extrinsics_bundle as bundle_stage_module
+import humancal.calibration.extrinsics_start as start_stage_module
 from evaluation.camera_metrics import camera_errors
 from humancal.calibration import CalibrationError, ExtrinsicsConfig, LiftedPoses, estimate_extrinsics, estimate_intrinsics
 from humancal.calibration.bundle import bundle_adjust, focal_bounds_from_fov
@@ -81,7 +82,7 @@ def test_a_view_the_linear_solve_gets_wrong_starts_from_the_other_views(ring_sce
     """The demo's failure: the linear solve gave view 1 a negative focal, which used to halve it down to the clamp
     of the linear range and start the bundle adjustment there (it ran off to 1e12 px). Now that view starts from
     trustworthy values and the bundle adjustment recovers it."""
-    solve = extrinsics_module.solve_focals_translations
+    solve = start_stage_module.solve_focals_translations
 
     def negative_view_1(*args, **kwargs):
         sol = solve(*args, **kwargs)
@@ -90,7 +91,8 @@ def test_a_view_the_linear_solve_gets_wrong_starts_from_the_other_views(ring_sce
         return type(sol)(focal, sol.t_cam_from_world_m, sol.residual_m, sol.inlier, sol.focal_rel_std,
                          sol.focal_rel_std_data, sol.pair_scale)
 
-    monkeypatch.setattr(extrinsics_module, "solve_focals_translations", negative_view_1)
+    monkeypatch.setattr(start_stage_module, "solve_focals_translations", negative_view_1)  # the linear solve
+    monkeypatch.setattr(bundle_stage_module, "solve_focals_translations", negative_view_1)  # and the blind starts
     cams = list(ring_scene.rig)
     d, lifted = ring_stand_in.detections, ring_stand_in.lifted
     intr = estimate_intrinsics(d, lifted, [(c.width_px, c.height_px) for c in cams])
@@ -106,7 +108,7 @@ def test_a_singular_stage_becomes_a_calibration_error(ring_scene, ring_stand_in,
     def singular(*args, **kwargs):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setattr(extrinsics_module, "bundle_adjust", singular)
+    monkeypatch.setattr(bundle_stage_module, "bundle_adjust", singular)
     cams = list(ring_scene.rig)
     d, lifted = ring_stand_in.detections, ring_stand_in.lifted
     intr = estimate_intrinsics(d, lifted, [(c.width_px, c.height_px) for c in cams])
