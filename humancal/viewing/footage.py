@@ -108,15 +108,15 @@ def footage_for_views(paths: Sequence[str | Path], view_names: Sequence[str],
         FileNotFoundError, FormatError: a path that :func:`open_footage` cannot read.
     """
     paths = [Path(p) for p in paths]
-    if len(paths) == len(view_names) and not (len(paths) == 1 and paths[0].is_dir() and
-                                              _named_in(paths[0], view_names[0]) is not None):
-        return [open_footage(p) for p in paths]
     if len(paths) == 1 and paths[0].is_dir():
         found = [_named_in(paths[0], name) for name in view_names]
-        if not any(f is not None for f in found):
+        if any(f is not None for f in found):  # a folder of footage named after the views
+            return [None if f is None else open_footage(f) for f in found]
+        if len(view_names) != 1:
             raise ValueError(f"{option}: {paths[0]} holds no footage named after the views "
                              f"({', '.join(view_names)}: <view>.mp4 or an image folder <view>/)")
-        return [None if f is None else open_footage(f) for f in found]
+    if len(paths) == len(view_names):  # one per view, in view order
+        return [open_footage(p) for p in paths]
     raise ValueError(f"{option}: expected one video file or image folder per view ({len(view_names)}: "
                      f"{', '.join(view_names)}), or one folder holding <view>.mp4 per view; got {len(paths)} paths")
 
@@ -214,8 +214,9 @@ def render_silhouettes(camera: Camera, people_vertices_m: Sequence[np.ndarray], 
         in_front = (depth[triangles] > 0.05).all(1) & np.isfinite(pixels[triangles]).all((1, 2))
         if in_front.any():
             drawn.append((float(np.median(depth)), index, pixels, triangles[in_front]))
+    palette = shades or _SHADES
     for _, index, pixels, triangles in sorted(drawn, reverse=True):  # far to near: nearer people cover farther ones
-        shade = (shades or _SHADES)[index % len(shades or _SHADES)]
+        shade = palette[index % len(palette)]
         corners = np.clip(np.round(pixels[triangles] * 4), -2**20, 2**20).astype(np.int32)  # 2 bits of sub-pixel
         cv2.fillPoly(image, list(corners), (shade, shade, shade), cv2.LINE_AA, shift=2)
     return image
