@@ -92,3 +92,41 @@ def test_importing_a_pure_package_loads_no_forbidden_package(package):
     assert out.returncode == 0, out.stderr[-2000:]
     loaded = out.stdout.strip().splitlines()[-1] if out.stdout.strip() else ""
     assert loaded == "", f"importing {package} loaded {loaded}"
+
+
+def _module_graph(packages: tuple[str, ...]) -> dict[str, set[str]]:
+    """module -> the project modules it imports (every import statement, inside functions and ``TYPE_CHECKING``
+    blocks too; ``from package import name`` counts as importing ``package.name`` when that is a module). A module
+    importing one of its own packages is left out: a package's ``__init__`` gathering its modules is no circle."""
+    paths = {".".join(p.relative_to(REPO).with_suffix("").parts).removesuffix(".__init__"): p
+             for package in packages for p in _modules(package)}
+    graph: dict[str, set[str]] = {name: set() for name in paths}
+    for name, path in paths.items():
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets = [f"{node.module}.{alias.name}" for alias in node.names] + [node.module]
+            for target in targets:
+                while target and target not in paths:
+                    target = target.rpartition(".")[0]
+                if target and target != name and not name.startswith(f"{target}."):
+                    graph[name].add(target)
+    return graph
+
+
+def test_no_import_circle():
+    """No two modules import each other, directly or through others (issue: `tracking` <-> `tracks`, `cli` <->
+    `capture_cli`)."""
+    import graphlib
+
+    graph = _module_graph(("humancal", "evaluation", "resources", "assets", "pipelines"))
+    try:
+        graphlib.TopologicalSorter(graph).prepare()
+    except graphlib.CycleError as error:
+        pytest.fail(f"import circle: {' -> '.join(error.args[1])}")
+    # the check sees a circle when there is one
+    graph["humancal.camera"].add("humancal.geometry.triangulation")
+    with pytest.raises(graphlib.CycleError):
+        graphlib.TopologicalSorter(graph).prepare()
