@@ -46,17 +46,22 @@ from scipy import ndimage
 
 from humancal.calibration.bundle_terms import (
     _Problem,
-    _camera_params,
     _focal_count,
     _lens,
     _log_focal,
-    _focal_parameters,
     _unpack,
     _residuals,
     _robust_cost,
     _normal_equations,
     _solve,
     _arrow,
+)
+from humancal.calibration.bundle_setup import (
+    BundleSetup,
+    bundle_setup,
+    check_start,
+    free_parameters,
+    start_cameras,
 )
 from humancal.calibration.types import CalibrationError
 from humancal.lifter.lifted import LiftedPoses
@@ -229,7 +234,7 @@ def bundle_adjust(
         CalibrationError: a starting camera, principal point or focal bound is not finite (naming the view),
             or a group has no finite starting keypoint.
     """
-    V, G = len(fx_px), len(groups)
+    V = len(fx_px)
     if lens not in ("pinhole", "k1", "k1k2"):
         raise ValueError(f"bundle_adjust: lens must be 'pinhole', 'k1' or 'k1k2', got {lens!r}")
     pp = np.asarray(principal_point_px, dtype=np.float64)
@@ -237,81 +242,17 @@ def bundle_adjust(
     R_init = np.asarray(R_cam_from_world, dtype=np.float64)
     t_init = np.asarray(t_cam_from_world_m, dtype=np.float64)
     bounds = focal_bounds_from_fov(2.0 * pp[:, 0]) if focal_bounds_px is None else np.asarray(focal_bounds_px, float)
-    for name, values in (("focal", np.c_[fx0, fy0]), ("principal point", pp), ("focal bounds", bounds),
-                         ("rotation", R_init.reshape(V, -1)), ("translation", t_init)):
-        bad = np.flatnonzero(~np.isfinite(values).all(1) | ((values <= 0).any(1) if name == "focal" else False))
-        if len(bad):
-            raise CalibrationError(f"bundle adjustment: views {bad.tolist()} start with a non-finite or non-positive "
-                                   f"{name}")
-    if not (bounds[:, 0] < bounds[:, 1]).all():
-        raise CalibrationError(f"bundle adjustment: focal bounds must be low < high, got {bounds.tolist()}")
-    X = np.asarray(points_world_m, dtype=np.float64).copy()
-    finite_pts = np.isfinite(X).all(-1)
-    empty = np.flatnonzero(~finite_pts.any(1))
-    if len(empty):
-        raise CalibrationError(f"bundle adjustment: groups {empty.tolist()[:10]} have no finite starting keypoint")
-    centre = np.nanmean(np.where(finite_pts[..., None], X, np.nan), axis=1)
-    X = np.where(finite_pts[..., None], X, centre[:, None])
-    rows = np.concatenate(groups)
-    grp = np.repeat(np.arange(G), [len(g) for g in groups])
-    sc = detections.scores[rows]
-    kp = detections.keypoints_px[rows]
-    with np.errstate(invalid="ignore"):
-        size = np.nanmax(np.linalg.norm(kp - np.nanmean(kp, 1, keepdims=True), axis=-1), axis=1)
-    sigma_px = np.maximum(0.01 * 2.0 * np.nan_to_num(size), 1.0)  # size ~ half the body extent
-    ok = (sc >= min_score) & np.isfinite(kp).all(-1)
-    d_idx, j_idx = np.nonzero(ok)
-    view = detections.view[rows]
-    lifted_joints = lifted.joints_cam_m[rows]
-    lifted_ok = np.isfinite(lifted_joints).all(-1)  # (S, 23): joints of NaN poses drop out of the shape term
-    prior_f = np.zeros(V) if focal_prior_px is None else np.log(np.asarray(focal_prior_px, dtype=np.float64))
-    prior_std = np.full(V, np.inf) if focal_prior_rel_std is None else np.asarray(focal_prior_rel_std, float)
-    prior_w = np.where(np.isfinite(prior_std) & np.isfinite(prior_f), 1.0 / np.maximum(prior_std, 1e-3), 0.0)
-    log_bounds = np.log(bounds)
-    prob = _Problem(
-        V=V, G=G, square=square_pixels,
-        o_group=grp[d_idx], o_view=view[d_idx], o_joint=j_idx,
-        o_px=kp[d_idx, j_idx] - pp[view[d_idx]],
-        o_w=np.sqrt(sc[d_idx, j_idx]) / sigma_px[d_idx],
-        s_group=grp, s_view=view, s_joints=np.where(lifted_ok[..., None], lifted_joints, 0.0),
-        shape_w=lifted_ok / shape_std_m,
-        log_f_mid=log_bounds.mean(1), log_f_half=0.5 * (log_bounds[:, 1] - log_bounds[:, 0]),
-        prior_log_f=np.nan_to_num(prior_f), prior_w=prior_w, huber=huber,
-        scale_w=1.0 / group_scale_std if group_scale_std else 0.0, free_scale=bool(group_scale_std),
-        lens=lens != "pinhole" or principal_point or lens_start is not None,
-        lens_prior_w=1.0 / np.asarray([lens_prior_std[0], lens_prior_std[1], lens_prior_std[2], lens_prior_std[2]],
-                                      dtype=np.float64),
-    )
-    nf = _focal_count(prob)
-    nc = _camera_params(prob)
-    log_f0 = np.log(np.c_[fx0] if square_pixels else np.c_[fx0, fy0])
-    if square_pixels and not np.allclose(fx0, fy0):
-        log_f0 = 0.5 * (np.log(np.c_[fx0]) + np.log(np.c_[fy0]))
-    outside = np.flatnonzero(((log_f0 < log_bounds[:, :1]) | (log_f0 > log_bounds[:, 1:])).any(1))
-    if len(outside):
-        logger.warning("bundle adjustment: views %s start outside their focal bounds (%s px at %s px): started "
-                       "inside", outside.tolist(), np.round(np.exp(log_f0[outside, 0])).tolist(),
-                       np.round(bounds[outside]).tolist())
-    cams = np.zeros((V, nc))
-    cams[:, :nf] = _focal_parameters(prob, log_f0)
-    cams[:, nf + 3 : nf + 6] = t_init
-    if prob.lens:
-        cams[:, nf + 6 :] = 0.0 if lens_start is None else np.asarray(lens_start, dtype=np.float64)
-    free = np.ones((V, nc), bool)
+    check_start(fx0, fy0, pp, bounds, R_init, t_init)
+    setup = bundle_setup(detections, lifted, groups, points_world_m, pp, bounds, square_pixels=square_pixels,
+                   focal_prior_px=focal_prior_px, focal_prior_rel_std=focal_prior_rel_std, shape_std_m=shape_std_m,
+                   group_scale_std=group_scale_std, min_score=min_score, huber=huber,
+                   lens=lens != "pinhole" or principal_point or lens_start is not None, lens_prior_std=lens_prior_std)
+    prob = setup.prob
+    cams = start_cameras(prob, fx0, fy0, t_init, np.log(bounds), lens_start)
     held = np.zeros(V, bool)
     held[list(hold_views)] = True
-    if not adjust_cameras:
-        free[:] = False
-    elif held.all():
-        raise ValueError("bundle_adjust: every view is held; nothing to adjust")
-    else:
-        free[held] = False
-        free[int(np.flatnonzero(~held)[0]), nf : nf + 6] = False  # the world frame
-    if prob.lens:  # which lens parameters move: the model's, in views that are not held
-        moving = np.array([lens != "pinhole", lens == "k1k2", principal_point, principal_point])
-        free[:, nf + 6 :] &= moving[None]
-        free[list(hold_lens_views), nf + 6 :] = False
-
+    free = free_parameters(prob, held, adjust_cameras, lens, principal_point, hold_lens_views)
+    nf = _focal_count(prob)
     scale_m = max(float(np.median(np.linalg.norm(t_init, axis=1))), 1e-3)
     if not free.any():
         camera_tolerance = 0.0  # the cameras never move: only the cost ends the iterations
@@ -340,15 +281,22 @@ def bundle_adjust(
         return (cams, R0, new[2], new[3]), still >= _STILL_ITERATIONS
 
     try:
-        outcome = levenberg_marquardt(linearize, trial, (cams, R_init.copy(), X, np.zeros(G)),
+        outcome = levenberg_marquardt(linearize, trial, (cams, R_init.copy(), setup.points, np.zeros(prob.G)),
                                       max_iterations=max_iterations, damping=_DAMPING, stop=Stop(tolerance),
                                       accepted=accepted)
     except FloatingPointError:
         raise CalibrationError("bundle adjustment: the starting cost is not finite (non-finite keypoints or "
                                "poses)") from None
+    return _result(setup, outcome, free, held, np.log(bounds), pp)
+
+
+def _result(setup: BundleSetup, outcome, free: np.ndarray, held: np.ndarray, log_bounds: np.ndarray,
+            pp: np.ndarray) -> BundleResult:
+    """The :class:`BundleResult` of the last accepted state: cameras, keypoints, stds (a focal at a bound:
+    undetermined, inf), per-view reprojection rms and status, each detection's error in stds."""
+    prob, V = setup.prob, setup.prob.V
     cams, R0, X, log_q = outcome.state
     cost, w_obs = outcome.cost, outcome.system[5]
-    it, rejected, converged = outcome.iterations, outcome.refused, outcome.converged
     nf = _focal_count(prob)
     dlogf = _log_focal(prob, cams[:, :nf])[1][:, 0]
     params_std = _camera_std(prob, cams, R0, X, log_q, free, w_obs)
@@ -365,18 +313,19 @@ def bundle_adjust(
     rms = np.array([np.sqrt(np.mean(err_px[(prob.o_view == v) & inl] ** 2)) if np.any((prob.o_view == v) & inl)
                     else np.nan for v in range(V)])
     status = np.where(held, "held", _view_status(prob, np.log(fx), log_bounds, P[:, 2], inl))
-    detection_error = _median_per_detection(err_px / sigma_px[d_idx], d_idx, len(rows))
+    detection_error = _median_per_detection(err_px / setup.sigma_px[setup.observed], setup.observed,
+                                            setup.detections)
     logger.info("bundle adjustment: %d groups, %d keypoints, %d iterations (%d steps refused), cost %.4g, rms %s px",
-                G, len(err_px), it, rejected, cost, np.round(rms, 2))
+                prob.G, len(err_px), outcome.iterations, outcome.refused, cost, np.round(rms, 2))
     if (status != "ok").any():
         logger.warning("bundle adjustment: views %s end %s", np.flatnonzero(status != "ok").tolist(),
                        status[status != "ok"].tolist())
     lens_values = _lens(prob, cams)
     distortion = np.zeros((V, 5))
     distortion[:, :2] = lens_values[:, :2]
-    return BundleResult(fx, fy, R, t, X, f_std, rms, float(inl.mean()) if len(inl) else 0.0, it, converged,
-                        np.exp(log_q), status, rejected, float(cost), detection_error, distortion,
-                        pp + lens_values[:, 2:], lens_std)
+    return BundleResult(fx, fy, R, t, X, f_std, rms, float(inl.mean()) if len(inl) else 0.0, outcome.iterations,
+                        outcome.converged, np.exp(log_q), status, outcome.refused, float(cost), detection_error,
+                        distortion, pp + lens_values[:, 2:], lens_std)
 
 
 def _camera_step(prob: _Problem, cams: np.ndarray, new_cams: np.ndarray, nf: int, scale_m: float) -> float:
