@@ -149,3 +149,30 @@ def test_footage_that_cannot_be_read_is_named(tmp_path):
         footage_for_views([tmp_path / "a.mp4", tmp_path / "b.mp4"], ["c1", "c2", "c3"], "--videos")
     with pytest.raises(ValueError, match="holds no footage named after the views"):
         footage_for_views([tmp_path / "empty"], ["c1", "c2"], "--videos")
+
+
+def test_a_captures_footage_is_read_on_the_captures_clock(tmp_path):
+    """``humancal add --videos`` with per-view frame rates and time offsets: each view's footage is read at its own
+    frame for the capture's frame n (n / fps_0 + offset_0 = m / fps_v + offset_v); dropped views have none."""
+    from humancal.inputs import capture_footage
+    from humancal.sequences import SequenceSpec
+
+    folders = []
+    for name in ("cam1", "cam2", "cam3"):
+        (tmp_path / "op" / name).mkdir(parents=True)
+        folder = tmp_path / "video" / name
+        folder.mkdir(parents=True)
+        for frame in range(4):
+            cv2.imwrite(str(folder / f"{frame:06d}.png"), np.zeros((30, 40, 3), np.uint8))
+        folders.append(str(folder))
+    options = {"format": "openpose", "views": [str(tmp_path / "op" / n) for n in ("cam1", "cam2", "cam3")],
+               "image_size": [40, 30], "fps": 30, "view_fps": {"cam2": 60}, "time_offsets": {"cam2": 0.5},
+               "videos": folders}
+    spec = SequenceSpec("lab", "take", "capture", options, str(tmp_path / "datasets.yaml"))
+    footage = capture_footage(spec, ["cam1", "cam2"])  # cam3 dropped
+    assert [f.path.name for f in footage] == ["cam1", "cam2"]
+    assert (footage[0].frame_scale, footage[0].frame_offset) == (1.0, 0.0)
+    # cam2 at 60 fps started 0.5 s late: the capture's frame 30 (1 s) is its frame (1 - 0.5) * 60 = 30
+    assert footage[1].frame_scale == 2.0 and footage[1].frame_offset == -30.0
+    assert capture_footage(dataclasses.replace(spec, options={**options, "videos": None}), ["cam1"]) is None
+    assert capture_footage(SequenceSpec("synthetic", "demo", "synthetic", {}), ["view_0"]) is None
