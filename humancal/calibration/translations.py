@@ -187,42 +187,10 @@ def solve_focals_translations(
         :class:`FocalTranslationSolution`.
     """
     V = len(R_cam_from_world)
-    # a pair enters only with finite roots and a positive std: one non-finite entry would make the whole normal
-    # matrix non-finite, and LAPACK's least squares then fails ("SVD did not converge") instead of ignoring it
-    with np.errstate(invalid="ignore", over="ignore"):
-        finite = np.isfinite(roots.T_cam_m).all(1) & np.isfinite(roots.zeta_m_per_px)
-        depth = 0.5 * (roots.T_cam_m[rows_a, 2] + roots.T_cam_m[rows_b, 2])
-        ok = finite[rows_a] & finite[rows_b] & np.isfinite(floor_std_m + depth_rel_std * depth) & (
-            floor_std_m + depth_rel_std * depth > 0)
-    ra, rb = rows_a[ok], rows_b[ok]
-    va, vb = view[ra], view[rb]
-    M = len(ra)
-    # unknowns: f (V), t (3V, t_0 fixed to 0 by a stiff prior row)
-    n = 4 * V
-    Rt = np.transpose(R_cam_from_world, (0, 2, 1))  # world_from_cam
-    za = Rt[va][:, :, 2] * roots.zeta_m_per_px[ra, None]  # (M, 3) d(world point)/d f_a
-    zb = Rt[vb][:, :, 2] * roots.zeta_m_per_px[rb, None]
-    lat_a = np.einsum("mij,mj->mi", Rt[va], np.c_[roots.T_cam_m[ra, :2], np.zeros(M)])
-    lat_b = np.einsum("mij,mj->mi", Rt[vb], np.c_[roots.T_cam_m[rb, :2], np.zeros(M)])
-    rhs = lat_b - lat_a
-    rows, cols, vals = [], [], []
-    eq = np.arange(3 * M).reshape(M, 3)
-    for k in range(3):
-        rows += [eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k]]
-        cols += [va, vb] + [V + 3 * va + i for i in range(3)] + [V + 3 * vb + i for i in range(3)]
-        vals += [za[:, k], -zb[:, k]] + [-Rt[va][:, k, i] for i in range(3)] + [Rt[vb][:, k, i] for i in range(3)]
-    A_pairs = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * M, n)).tocsr()
-    # camera 0 at the origin (stiff rows), focal priors in units of their std
-    prior_f = np.flatnonzero(np.isfinite(focal_prior_rel_std) & np.isfinite(focal_prior_px) & (focal_prior_px > 0))
-    s = focal_prior_rel_std[prior_f] * focal_prior_px[prior_f]
-    n_extra = 3 + len(prior_f)
-    A_extra = coo_matrix(
-        (np.r_[np.full(3, 1e3), 1.0 / s], (np.arange(n_extra), np.r_[V + np.arange(3), prior_f])), shape=(n_extra, n)
-    ).tocsr()
-    b_extra = np.r_[np.zeros(3), focal_prior_px[prior_f] / s]
-    f_ref = float(np.nanmedian(focal_prior_px)) if np.isfinite(focal_prior_px).any() else 1000.0
-    col_scale = diags(np.r_[np.full(V, f_ref), np.ones(3 * V)])
-    sigma = floor_std_m + depth_rel_std * 0.5 * (roots.T_cam_m[ra, 2] + roots.T_cam_m[rb, 2])
+    system = _pair_system(roots, view, rows_a, rows_b, R_cam_from_world, focal_prior_px, focal_prior_rel_std,
+                          depth_rel_std, floor_std_m)
+    ok, M, A_pairs, rhs, sigma = system.ok, system.M, system.A_pairs, system.rhs, system.sigma
+    A_extra, b_extra, col_scale = system.A_extra, system.b_extra, system.col_scale
     weight = 1.0 / sigma
     Ps = A_pairs @ col_scale  # scaled columns keep the normal matrix well conditioned
     Es = A_extra @ col_scale
@@ -293,12 +261,7 @@ def solve_focals_translations(
     residual_m = np.linalg.norm(res_m, axis=1)
     focal = x[:V]
     t = x[V:].reshape(V, 3)
-    # approximate std of the focal lengths from the (reweighted, scales eliminated) normal equations, with and
-    # without the focal priors
-    cov = col_scale @ np.linalg.pinv(reduced_data + E_normal) @ col_scale
-    f_std = np.sqrt(np.maximum(np.diag(cov)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
-    cov_data = col_scale @ np.linalg.pinv(reduced_data + (gauge.T @ gauge).toarray(), rcond=1e-12) @ col_scale
-    f_std_data = np.sqrt(np.maximum(np.diag(cov_data)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
+    f_std, f_std_data = _focal_stds(reduced_data, E_normal, gauge, col_scale, focal)
     residual = np.full(len(rows_a), np.nan)
     residual[ok] = residual_m
     inlier = np.zeros(len(rows_a), bool)
@@ -306,6 +269,84 @@ def solve_focals_translations(
     pair_scale = np.ones(len(rows_a))
     pair_scale[ok] = np.exp(-log_q)
     return FocalTranslationSolution(focal, t, residual, inlier, f_std, f_std_data, pair_scale)
+
+
+@dataclass(frozen=True)
+class _PairSystem:
+    """The linear system of :func:`solve_focals_translations` at ``s = 1``: unknowns ``x = (f (V), t (3V))``.
+
+    Attributes:
+        ok: (M_all,) the candidate pairs that enter (finite roots, a positive std); M: how many.
+        A_pairs: (3M, 4V) sparse pair rows ``R_a^T z_a f_a - R_b^T z_b f_b - R_a^T t_a + R_b^T t_b``; rhs: (M, 3)
+            their right-hand side (the roots' lateral parts), metres.
+        A_extra, b_extra: camera 0 at the origin (stiff rows) and the focal priors in units of their std.
+        col_scale: (4V, 4V) sparse column scaling (focal columns by a typical focal length).
+        sigma: (M,) each pair's std, metres.
+    """
+
+    ok: np.ndarray
+    M: int
+    A_pairs: object
+    rhs: np.ndarray
+    A_extra: object
+    b_extra: np.ndarray
+    col_scale: object
+    sigma: np.ndarray
+
+
+def _pair_system(roots, view, rows_a, rows_b, R_cam_from_world, focal_prior_px, focal_prior_rel_std, depth_rel_std,
+                 floor_std_m) -> _PairSystem:
+    """Assemble :class:`_PairSystem` (arguments as :func:`solve_focals_translations`)."""
+    V = len(R_cam_from_world)
+    # a pair enters only with finite roots and a positive std: one non-finite entry would make the whole normal
+    # matrix non-finite, and LAPACK's least squares then fails ("SVD did not converge") instead of ignoring it
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = np.isfinite(roots.T_cam_m).all(1) & np.isfinite(roots.zeta_m_per_px)
+        depth = 0.5 * (roots.T_cam_m[rows_a, 2] + roots.T_cam_m[rows_b, 2])
+        ok = finite[rows_a] & finite[rows_b] & np.isfinite(floor_std_m + depth_rel_std * depth) & (
+            floor_std_m + depth_rel_std * depth > 0)
+    ra, rb = rows_a[ok], rows_b[ok]
+    va, vb = view[ra], view[rb]
+    M = len(ra)
+    # unknowns: f (V), t (3V, t_0 fixed to 0 by a stiff prior row)
+    n = 4 * V
+    Rt = np.transpose(R_cam_from_world, (0, 2, 1))  # world_from_cam
+    za = Rt[va][:, :, 2] * roots.zeta_m_per_px[ra, None]  # (M, 3) d(world point)/d f_a
+    zb = Rt[vb][:, :, 2] * roots.zeta_m_per_px[rb, None]
+    lat_a = np.einsum("mij,mj->mi", Rt[va], np.c_[roots.T_cam_m[ra, :2], np.zeros(M)])
+    lat_b = np.einsum("mij,mj->mi", Rt[vb], np.c_[roots.T_cam_m[rb, :2], np.zeros(M)])
+    rhs = lat_b - lat_a
+    rows, cols, vals = [], [], []
+    eq = np.arange(3 * M).reshape(M, 3)
+    for k in range(3):
+        rows += [eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k]]
+        cols += [va, vb] + [V + 3 * va + i for i in range(3)] + [V + 3 * vb + i for i in range(3)]
+        vals += [za[:, k], -zb[:, k]] + [-Rt[va][:, k, i] for i in range(3)] + [Rt[vb][:, k, i] for i in range(3)]
+    A_pairs = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * M, n)).tocsr()
+    # camera 0 at the origin (stiff rows), focal priors in units of their std
+    prior_f = np.flatnonzero(np.isfinite(focal_prior_rel_std) & np.isfinite(focal_prior_px) & (focal_prior_px > 0))
+    s = focal_prior_rel_std[prior_f] * focal_prior_px[prior_f]
+    n_extra = 3 + len(prior_f)
+    A_extra = coo_matrix(
+        (np.r_[np.full(3, 1e3), 1.0 / s], (np.arange(n_extra), np.r_[V + np.arange(3), prior_f])), shape=(n_extra, n)
+    ).tocsr()
+    b_extra = np.r_[np.zeros(3), focal_prior_px[prior_f] / s]
+    f_ref = float(np.nanmedian(focal_prior_px)) if np.isfinite(focal_prior_px).any() else 1000.0
+    col_scale = diags(np.r_[np.full(V, f_ref), np.ones(3 * V)])
+    sigma = floor_std_m + depth_rel_std * 0.5 * (roots.T_cam_m[ra, 2] + roots.T_cam_m[rb, 2])
+    return _PairSystem(ok, M, A_pairs, rhs, A_extra, b_extra, col_scale, sigma)
+
+
+def _focal_stds(reduced_data: np.ndarray, E_normal: np.ndarray, gauge, col_scale, focal: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(V,) relative stds of the focal lengths from the (reweighted, scales eliminated) normal equations, with the
+    focal priors and without them (the data only, the gauge rows fixing camera 0)."""
+    V = len(focal)
+    cov = col_scale @ np.linalg.pinv(reduced_data + E_normal) @ col_scale
+    f_std = np.sqrt(np.maximum(np.diag(cov)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
+    cov_data = col_scale @ np.linalg.pinv(reduced_data + (gauge.T @ gauge).toarray(), rcond=1e-12) @ col_scale
+    f_std_data = np.sqrt(np.maximum(np.diag(cov_data)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
+    return f_std, f_std_data
 
 
 def _least_squares(normal: np.ndarray, rhs: np.ndarray, num_views: int) -> np.ndarray:
