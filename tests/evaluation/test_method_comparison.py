@@ -1,5 +1,6 @@
 import numpy as np
 import pandas as pd
+import pytest
 
 from evaluation.method_comparison import METHODS, _with_true_principal_points
 from humancal.camera import Camera
@@ -21,6 +22,7 @@ def test_known_principal_point_diagnostic_takes_only_the_principal_point_from_th
     assert estimated.K[0, 2] == 516.0  # the input is not changed in place
 
 
+@pytest.mark.slow  # 30 s; the default run meets the row in tests/pipelines/test_association_assets.py
 def test_convention_floor_row_scores_the_best_centred_cameras_without_a_fit():
     from evaluation.method_comparison import method_metric_table
     from humancal.sequences import SequenceSpec

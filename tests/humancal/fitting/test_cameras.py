@@ -53,6 +53,7 @@ def test_the_variables_start_at_the_rig_and_carry_gradients(scene_inputs):  # no
         BodyFitConfig(cameras="intrinsics")
 
 
+@pytest.mark.slow  # 30 s; the default run refines cameras with bodies in the capture end-to-end test
 def test_joint_refinement_brings_perturbed_cameras_back(body_model, scene_inputs):  # noqa: F811
     torch.manual_seed(0)
     _, observations, rig = scene_inputs

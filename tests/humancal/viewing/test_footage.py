@@ -34,7 +34,7 @@ _TORSO = [JOINT_INDEX[name] for name in ("left_hip", "right_hip", "left_shoulder
 @pytest.fixture(scope="module")
 def filmed(body_model, tmp_path_factory):
     """A small synthetic scene, its true bodies' meshes and the footage rendered of them."""
-    scene = generate_scene(preset("tiny", num_frames=10, num_people=2, num_views=3, seed=5), body_model, sequence="f")
+    scene = generate_scene(preset("tiny", num_frames=6, num_people=2, num_views=3, seed=5), body_model, sequence="f")
     motions = FittedMotions.from_table(scene.motions, scene.config.fps)
     meshes, faces = fitted_meshes(body_model, motions)
     keypoints = fitted_keypoints(motions)
