@@ -159,15 +159,33 @@ def _scatter_blocks(target: np.ndarray, index: np.ndarray, blocks: np.ndarray) -
 
 def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     """Gauss-Newton blocks: Hcc (V, nc, nc), Hcp (G, V, nc, 3J + 1), Hpp (G, 3J + 1, 3J + 1), gc (V, nc),
-    gp (G, 3J + 1); the last point parameter of a group is its log scale ``log q``."""
+    gp (G, 3J + 1); the last point parameter of a group is its log scale ``log q``. Also the robust cost and the
+    reprojections' Huber weights (O,).
+
+    The terms are added in order: the reprojections (:func:`_reprojection_terms`), the lifted poses' shapes
+    (:func:`_add_shape_terms`), the groups' scales (:func:`_scale_terms`), the priors (:func:`_add_priors`); then the
+    fixed camera parameters are taken out (:func:`_hold_fixed`)."""
+    residuals = _residuals(p, cams, R0, X, log_q)
+    r_obs, r_shape, r_prior, r_scale, _ = residuals
+    w_obs = _huber_weights(np.linalg.norm(r_obs, axis=1), p.huber)
+    w_shape = _huber_weights(np.linalg.norm(r_shape, axis=2), p.huber)  # (S, 23)
+    Hcc, gc, Hcp, Hpp, gp, dlogf = _reprojection_terms(p, cams, residuals, w_obs)
+    J3 = 3 * NUM_JOINTS
+    Hpp_joints = Hpp[:, :J3, :J3].reshape(p.G, NUM_JOINTS, 3, NUM_JOINTS, 3)  # a view
+    rel, Rrel, w2, ws, qs, rs = _add_shape_terms(p, X, log_q, residuals, w_shape, Hcc, gc, Hcp, Hpp_joints, gp)
+    gp, Hcp = _scale_terms(p, residuals[3], rel, Rrel, w2, ws, qs, rs, Hpp, gp, Hcp)
+    _add_priors(p, dlogf, r_prior, Hcc, gc)
+    Hcc = _hold_fixed(Hcc, gc, Hcp, free_cam)
+    return Hcc, Hcp, Hpp, gc, gp, _robust_cost(r_obs, r_shape, r_prior, r_scale, p.huber), w_obs
+
+
+def _reprojection_terms(p: _Problem, cams, residuals, w_obs):
+    """The reprojections' blocks: d r / d P (2x3) chained to the camera and point parameters. Returns Hcc, gc,
+    Hcp (without the scale column), Hpp (with it, zero), gp (without it) and d log f / d u (V, nf)."""
     nc = _camera_params(p)
     nf = 1 if p.square else 2
     J3 = 3 * NUM_JOINTS
-    r_obs, r_shape, r_prior, r_scale, (fx, fy, R, t, P) = _residuals(p, cams, R0, X, log_q)
-    w_obs = _huber_weights(np.linalg.norm(r_obs, axis=1), p.huber)
-    w_shape = _huber_weights(np.linalg.norm(r_shape, axis=2), p.huber)  # (S, 23)
-
-    # --- reprojection: d r / d P (2x3), then chain to camera and point parameters
+    r_obs, _, _, _, (fx, fy, R, t, P) = residuals
     v, O = p.o_view, len(p.o_view)
     behind = P[:, 2] <= 1e-6  # their residual is a constant penalty: no gradient
     z = np.where(behind, 1.0, P[:, 2])
@@ -222,6 +240,16 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     gp = np.bincount((p.o_group[:, None] * J3 + cols).ravel(), np.einsum("ori,or->oi", Jp, r).ravel(),
                      minlength=p.G * J3).reshape(p.G, J3)
 
+    return Hcc, gc, Hcp, Hpp, gp, dlogf
+
+
+def _add_shape_terms(p: _Problem, X, log_q, residuals, w_shape, Hcc, gc, Hcp, Hpp_joints, gp):
+    """Add the lifted poses' shape terms to the blocks (in place); returns what the scale terms reuse: the joints
+    relative to the hips (S, 23, 3) and turned into the camera (S, 23, 3), the squared weights with q^2 (S, 23),
+    the weights (S, 23), the scales q (S,) and the weighted residuals (S, 23, 3)."""
+    nf = 1 if p.square else 2
+    J3 = 3 * NUM_JOINTS
+    _, r_shape, _, _, (_, _, R, _, _) = residuals
     # --- shape: r_k = w_k (R_v (X_k - (X_lh + X_rh)/2) - L_k); d r_k / d X_m = w_k R_v D[k, m] with
     # D = I - 1 c^T (c = 1/2 at both hips). R_v^T R_v = I makes the point block (D^T W^2 D) kron I_3.
     # with the group's scale q: r_k = w_k (q R_v rel_k - L_k); every derivative gains a factor q
@@ -258,6 +286,16 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     _scatter_blocks(Hcp_rot.reshape(p.G * p.V, 3, J3), p.s_group * p.V + sv, cross.transpose(0, 2, 1, 3).reshape(S, 3, J3))
     Hcp[:, :, nf : nf + 3, :] += Hcp_rot
 
+    return rel, Rrel, w2, ws, qs, rs
+
+
+def _scale_terms(p: _Problem, r_scale, rel, Rrel, w2, ws, qs, rs, Hpp, gp, Hcp):
+    """The groups' log scales: their row and column of Hpp (in place), gp and Hcp with their column added."""
+    nc = _camera_params(p)
+    J3 = 3 * NUM_JOINTS
+    S = len(p.s_view)
+    c = np.zeros(NUM_JOINTS)
+    c[[_LHIP, _RHIP]] = 0.5
     # --- group scales (log q): d r_k / d log q = w_k q R rel_k; its cross term with the rotation vanishes
     # ((-q w [a]x)^T (q w a) = 0) and with the points it is q^2 (w_m^2 rel_m - c_m sum_k w_k^2 rel_k)
     jq = (ws * qs[:, None])[..., None] * Rrel  # (S, 23, 3)
@@ -273,6 +311,12 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
     gp = np.concatenate([gp, gq[:, None]], axis=1)
     Hcp = np.concatenate([Hcp, np.zeros((p.G, p.V, nc, 1))], axis=3)
 
+    return gp, Hcp
+
+
+def _add_priors(p: _Problem, dlogf, r_prior, Hcc, gc) -> None:
+    """Add the focal priors and the lens parameters' zero-mean priors (in place)."""
+    nf = 1 if p.square else 2
     # --- focal priors
     for vv in range(p.V):
         if p.prior_w[vv] > 0:
@@ -283,16 +327,20 @@ def _normal_equations(p: _Problem, cams, R0, X, log_q, free_cam):
         lens_rows = np.arange(nf + 6, nf + 10)
         Hcc[:, lens_rows, lens_rows] += p.lens_prior_w**2
         gc[:, lens_rows] += r_prior[p.V:].reshape(p.V, -1) * p.lens_prior_w
-    # fixed camera parameters
+
+
+def _hold_fixed(Hcc, gc, Hcp, free_cam):
+    """Take the fixed camera parameters (``~free_cam`` (V, nc)) out: identity rows in Hcc (a copy), zeros in gc and
+    Hcp (in place)."""
     Hcc[~free_cam] = 0.0
     Hcc = Hcc.copy()
-    for vv in range(p.V):
+    for vv in range(len(Hcc)):
         fixed = ~free_cam[vv]
         Hcc[vv][:, fixed] = 0.0
         Hcc[vv][fixed, fixed] = 1.0
     gc[~free_cam] = 0.0
     Hcp[:, ~free_cam] = 0.0
-    return Hcc, Hcp, Hpp, gc, gp, _robust_cost(r_obs, r_shape, r_prior, r_scale, p.huber), w_obs
+    return Hcc
 
 
 def _arrow(Hcc, Hcp, Hpp, gc, gp) -> ArrowSystem:
