@@ -14,13 +14,9 @@ from __future__ import annotations
 import argparse
 import tempfile
 
-import cv2
 import numpy as np
-import pandas as pd
 
-from humancal.viewing import person_colour
-from humancal.viewing.overlays import distance_to_colour, write_overlays
-from humancal.viewing.reprojection import detection_people, reprojected_fit
+from humancal.viewing.overlays import overlay_alignment, write_overlays
 from pipelines.view_command import capture_view
 
 
@@ -34,36 +30,10 @@ def main() -> None:
     view = capture_view(args.partition, meshes=False, videos=args.videos)
     numbers = np.asarray(sorted(view.detections["frame"].unique()))
     frames = numbers[(numbers >= start) & (numbers < stop) & ((numbers - start) % step == 0)]
-    people = detection_people(view.associations)
-    rows = []
     with tempfile.TemporaryDirectory() as out:
         result = write_overlays(view, out, frames=frames, show_detections=False, max_width_px=100_000)
-        for v, (name, camera, path) in enumerate(zip(view.view_names, view.cameras["final"], result.videos)):
-            mine = view.detections[(view.detections["view"] == v) & (view.detections["score"] > 0)]
-            fits = reprojected_fit(view.keypoints_world_m, v, camera, mine, people)
-            by_frame = {int(f): rows for f, rows in mine.groupby("frame")}
-            capture = cv2.VideoCapture(str(path))
-            distances, errors = [], []
-            for frame in result.frames:
-                ok, image = capture.read()
-                if not ok:
-                    raise RuntimeError(f"{path}: frame {frame} missing")
-                fit = fits.get(int(frame))
-                if fit is not None and np.isfinite(fit.error_px):
-                    errors.append(fit.error_px)
-                for det_id, det in by_frame.get(int(frame), pd.DataFrame(columns=mine.columns)).groupby("det_id"):
-                    person_id = people.get((int(frame), v, int(det_id)), -1)
-                    if person_id >= 0 and fit is not None and person_id in fit.people:
-                        distances += distance_to_colour(image, person_colour(person_id),
-                                                        det[["x_px", "y_px"]].to_numpy()).tolist()
-            capture.release()
-            distances = np.asarray(distances)
-            rows.append({"view": name, "frames": len(result.frames), "joints": len(distances),
-                         "fit_error_px (median)": np.median(errors),
-                         "detection_to_drawn_fit_px (median)": np.median(distances),
-                         "p90": np.percentile(distances, 90),
-                         "within_fit_error_plus_3px": np.mean(distances <= np.median(errors) + 3.0)})
-    print(pd.DataFrame(rows).to_markdown(index=False, floatfmt=".2f"))
+        table = overlay_alignment(view, result)
+    print(table.to_markdown(index=False, floatfmt=".2f"))
 
 
 if __name__ == "__main__":

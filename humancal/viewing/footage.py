@@ -256,8 +256,11 @@ def write_footage(view_names: Sequence[str], cameras: Sequence[Camera],
         try:
             for image in _rendered(camera, light, frames):
                 writer.write(image)
-        finally:
+        except BaseException:
             writer.release()
+            partial.unlink(missing_ok=True)  # nothing half-written is left behind
+            raise
+        writer.release()
         partial.replace(path)
         paths.append(path)
         progress(f"{name}: {len(frames)} frames -> {path}")

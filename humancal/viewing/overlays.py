@@ -28,7 +28,7 @@ from humancal.viewing.footage import FootageReader
 from humancal.viewing.recording import CaptureView, person_colour
 from humancal.viewing.reprojection import FrameFit, detection_people, joint_index, reprojected_fit
 
-__all__ = ["OverlayResult", "distance_to_colour", "draw_frame", "write_overlays"]
+__all__ = ["OverlayResult", "distance_to_colour", "draw_frame", "overlay_alignment", "write_overlays"]
 
 _REJECTED = (150, 150, 150)
 _BACKGROUND = (32, 32, 32)
@@ -156,10 +156,14 @@ def write_overlays(view: CaptureView, out_dir: str | Path, *, frames: Sequence[i
                 writer.write(image)
                 if int(frame) in sheet_at:
                     row.append(cv2.resize(image, (320, int(round(320 * size[1] / size[0])))))
-        finally:
+        except BaseException:
             writer.release()
+            partial.unlink(missing_ok=True)  # nothing half-written is left behind
+            raise
+        finally:
             if reader is not None:
                 reader.close()
+        writer.release()
         partial.replace(path)
         videos.append(path)
         errors = [f.error_px for f in fits.values() if np.isfinite(f.error_px)]
@@ -207,3 +211,53 @@ def distance_to_colour(image_bgr: np.ndarray, colour_rgb, points_px: np.ndarray,
     x, y = np.floor(points[inside]).astype(int).T
     out[inside] = distance[y, x]
     return out
+
+
+def overlay_alignment(view: CaptureView, result: OverlayResult) -> pd.DataFrame:
+    """How well written overlays sit on the detections, measured on the video frames: per view, the fit's median
+    reprojection error and, for every confident joint of a detection the association gave a person, the distance
+    to the nearest pixel drawn in that person's colour (write the overlays with ``show_detections=False`` so that
+    only the fit carries the colours).
+
+    Returns:
+        One row per view: ``view``, ``frames``, ``joints``, ``fit_error_px`` (median over frames),
+        ``distance_px`` (median over joints), ``distance_p90_px``, ``within_error_plus_3px`` (fraction).
+
+    Raises:
+        OSError: a video has fewer frames than ``result.frames``.
+    """
+    people = detection_people(view.associations)
+    rows = []
+    for v, (name, camera, path) in enumerate(zip(view.view_names, view.cameras["final"], result.videos)):
+        mine = view.detections[(view.detections["view"] == v) & (view.detections["score"] > 0)]
+        fits = reprojected_fit(view.keypoints_world_m, v, camera, mine, people)
+        by_frame = {int(f): rows_ for f, rows_ in mine.groupby("frame")}
+        capture = cv2.VideoCapture(str(path))
+        distances, errors = [], []
+        try:
+            for frame in result.frames:
+                ok, image = capture.read()
+                if not ok:
+                    raise OSError(errno.EIO, f"frame {frame} missing", str(path))
+                fit = fits.get(int(frame))
+                if fit is None:
+                    continue
+                if np.isfinite(fit.error_px):
+                    errors.append(fit.error_px)
+                detections = by_frame.get(int(frame))
+                for det_id, det in ([] if detections is None else detections.groupby("det_id")):
+                    person_id = people.get((int(frame), v, int(det_id)), -1)
+                    if person_id in fit.people:
+                        scale = image.shape[1] / camera.width_px
+                        distances += (distance_to_colour(image, person_colour(person_id),
+                                                         det[["x_px", "y_px"]].to_numpy() * scale) / scale).tolist()
+        finally:
+            capture.release()
+        distances = np.asarray(distances)
+        error = float(np.median(errors)) if errors else float("nan")
+        rows.append({"view": name, "frames": len(result.frames), "joints": len(distances), "fit_error_px": error,
+                     "distance_px": float(np.median(distances)) if len(distances) else float("nan"),
+                     "distance_p90_px": float(np.percentile(distances, 90)) if len(distances) else float("nan"),
+                     "within_error_plus_3px": float(np.mean(distances <= error + 3.0)) if len(distances)
+                     else float("nan")})
+    return pd.DataFrame(rows)

@@ -15,7 +15,7 @@ from humancal.fitting import FittedMotions
 from humancal.formats import FormatError
 from humancal.keypoints import JOINT_INDEX
 from humancal.synthetic import generate_scene, preset
-from humancal.viewing import CaptureView, person_colour
+from humancal.viewing import CaptureView
 from humancal.viewing.footage import (
     BACKGROUND_BGR,
     FootageReader,
@@ -24,9 +24,9 @@ from humancal.viewing.footage import (
     open_footage,
     write_footage,
 )
-from humancal.viewing.overlays import distance_to_colour, write_overlays
+from humancal.viewing.overlays import overlay_alignment, write_overlays
 from humancal.viewing.mesh import fitted_meshes
-from humancal.viewing.reprojection import detection_people, fitted_keypoints, reprojected_fit
+from humancal.viewing.reprojection import fitted_keypoints
 
 _TORSO = [JOINT_INDEX[name] for name in ("left_hip", "right_hip", "left_shoulder", "right_shoulder")]
 
@@ -83,29 +83,20 @@ def test_overlays_on_the_footage_lie_on_the_detections_within_the_fits_error(fil
     scene, cameras, names, keypoints, folder, _ = filmed
     footage = footage_for_views([str(folder)], names)
     assert all(f is not None for f in footage)
-    people = detection_people(scene.associations)
 
     def measured(final_cameras) -> tuple[float, float]:
         view = CaptureView("f", names, {"final": final_cameras}, scene.config.fps, detections=scene.detections,
                            associations=scene.associations, keypoints_world_m=keypoints, footage=footage)
         out = tmp_path / f"overlays{len(list(tmp_path.iterdir()))}"
         result = write_overlays(view, out, show_detections=False, max_width_px=10_000)
-        distances, errors = [], []
-        for v, path in enumerate(result.videos):
-            mine = scene.detections[(scene.detections["view"] == v) & (scene.detections["score"] > 0)]
-            fits = reprojected_fit(keypoints, v, final_cameras[v], mine, people)
+        for v, path in enumerate(result.videos):  # the overlays are drawn at the cameras' full size
             capture = cv2.VideoCapture(str(path))
-            for frame in result.frames:
-                ok, image = capture.read()
-                assert ok and image.shape[:2] == (cameras[v].height_px, cameras[v].width_px)
-                errors.append(fits[int(frame)].error_px)
-                for det_id, det in mine[mine["frame"] == frame].groupby("det_id"):
-                    person_id = people.get((int(frame), v, int(det_id)), -1)
-                    if person_id >= 0:
-                        distances += distance_to_colour(image, person_colour(person_id),
-                                                        det[["x_px", "y_px"]].to_numpy()).tolist()
+            assert (capture.get(cv2.CAP_PROP_FRAME_WIDTH), capture.get(cv2.CAP_PROP_FRAME_HEIGHT)) == \
+                (cameras[v].width_px, cameras[v].height_px)
             capture.release()
-        return float(np.median(distances)), float(np.nanmedian(errors))
+        table = overlay_alignment(view, result)
+        assert (table["joints"] > 20).all()
+        return float(np.median(table["distance_px"])), float(np.median(table["fit_error_px"]))
 
     distance, error = measured(cameras)
     assert 0.0 < error < 10.0 and distance <= error + 3.0
@@ -176,3 +167,34 @@ def test_a_captures_footage_is_read_on_the_captures_clock(tmp_path):
     assert footage[1].frame_scale == 2.0 and footage[1].frame_offset == -30.0
     assert capture_footage(dataclasses.replace(spec, options={**options, "videos": None}), ["cam1"]) is None
     assert capture_footage(SequenceSpec("synthetic", "demo", "synthetic", {}), ["view_0"]) is None
+
+
+def test_a_writer_that_fails_leaves_nothing_half_written(filmed, tmp_path, monkeypatch):
+    import humancal.viewing.overlays as overlays
+
+    scene, cameras, names, keypoints, _, _ = filmed
+    calls = []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("disk gone")
+        return np.zeros((cameras[0].height_px, cameras[0].width_px, 3), np.uint8)
+
+    monkeypatch.setattr(overlays, "draw_frame", failing)
+    view = CaptureView("f", names, {"final": cameras}, scene.config.fps, detections=scene.detections,
+                       associations=scene.associations, keypoints_world_m=keypoints)
+    with pytest.raises(RuntimeError, match="disk gone"):
+        write_overlays(view, tmp_path / "overlays")
+    assert list((tmp_path / "overlays").iterdir()) == []
+    import humancal.viewing.footage as footage_module
+
+    def frames_then_failure(*args):
+        yield np.zeros((cameras[0].height_px, cameras[0].width_px, 3), np.uint8)
+        raise RuntimeError("disk gone")
+
+    monkeypatch.setattr(footage_module, "_rendered", frames_then_failure)
+    meshes = {0: (np.arange(2), np.zeros((2, 3, 3)))}
+    with pytest.raises(RuntimeError, match="disk gone"):
+        write_footage(names[:1], cameras[:1], meshes, np.array([[0, 1, 2]]), [0, 1], 30.0, tmp_path / "footage")
+    assert list((tmp_path / "footage").iterdir()) == []
