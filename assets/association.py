@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import threadpoolctl
 
-from assets.common import latest_metadata_float, UPDATE_CONDITION, png_metadata, table_metadata, table_output
+from assets.common import UPDATE_CONDITION, png_metadata, table_metadata, table_output
 from assets.partitions import SEQUENCES
 from assets.settings import AssociationSettings
 from humancal.association import associate, to_associations_table, to_skeletons_table
@@ -64,8 +64,3 @@ def association(context: dg.AssetExecutionContext, config: AssociationSettings, 
     yield table_output(skeletons, "skeletons3d", output_name="skeletons3d", rows=len(skeletons),
                        num_people=int(result.num_people), skeletons=int(len(result.skeleton_frame)),
                        valid_joint_fraction=float(np.mean(skeletons["valid"])) if len(skeletons) else 0.0)
-
-
-def latest_association_seconds(instance: dg.DagsterInstance, partition: str) -> float:
-    """The run time of the latest ``associations`` materialization of a partition, seconds (NaN if unrecorded)."""
-    return latest_metadata_float(instance, "associations", partition, "seconds_total")

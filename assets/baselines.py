@@ -5,7 +5,7 @@ import dagster as dg
 import pandas as pd
 import threadpoolctl
 
-from assets.common import UPDATE_CONDITION, latest_metadata_float, sequence_asset, table_metadata, table_output
+from assets.common import UPDATE_CONDITION, sequence_asset, table_metadata, table_output
 from assets.partitions import SEQUENCES
 from evaluation.association_metrics import associate_tables
 from humancal.baselines import triangulate_identified
@@ -66,8 +66,3 @@ def gt_camera_association(context: dg.AssetExecutionContext, datasets: DatasetsR
     yield table_output(people, "associations", output_name="gt_camera_associations", rows=len(people),
                        seconds_total=round(seconds, 3))
     yield table_output(skeletons, "skeletons3d", output_name="gt_camera_skeletons3d", rows=len(skeletons))
-
-
-def gt_camera_association_seconds(instance: dg.DagsterInstance, partition: str) -> float:
-    """The run time of the latest ``gt_camera_associations`` of a partition, seconds (NaN if unrecorded)."""
-    return latest_metadata_float(instance, "gt_camera_associations", partition, "seconds_total")

@@ -8,7 +8,7 @@ import dagster as dg
 import numpy as np
 import pandas as pd
 
-from assets.common import UPDATE_CONDITION, latest_metadata_float, png_metadata, table_metadata, table_output
+from assets.common import UPDATE_CONDITION, png_metadata, table_metadata, table_output
 from assets.motion_prior import prior_from_checkpoint
 from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
@@ -116,8 +116,3 @@ def _camera_changes(before: CameraRig, after: CameraRig) -> dict[str, float]:
                                   * 1000.0),
         "angle_change_deg": float(np.degrees(np.arccos(cos)).mean()),
     }
-
-
-def latest_fit_seconds(instance: dg.DagsterInstance, partition: str) -> float:
-    """The fit time of the latest ``fitted_motions`` materialization of a partition, seconds (NaN if unrecorded)."""
-    return latest_metadata_float(instance, "fitted_motions", partition, "seconds_total")

@@ -74,14 +74,3 @@ def png_metadata(path: Path, alt: str) -> dg.MetadataValue:
     """A PNG file as Markdown metadata (an inline image the Dagster UI shows on the asset page)."""
     data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
     return dg.MetadataValue.md(f"![{alt}](data:image/png;base64,{data})")
-
-
-def latest_metadata_float(instance: dg.DagsterInstance, asset: str, partition: str, key: str) -> float:
-    """A number from the metadata of an asset partition's latest materialization (NaN if unrecorded), e.g. the
-    ``seconds_total`` of ``associations`` for the metric table's ``seconds`` rows."""
-    records = instance.fetch_materializations(
-        dg.AssetRecordsFilter(asset_key=dg.AssetKey(asset), asset_partitions=[partition]), limit=1).records
-    if not records:
-        return float("nan")
-    value = records[0].asset_materialization.metadata.get(key)
-    return float(value.value) if value is not None else float("nan")

@@ -7,7 +7,7 @@ import pandas as pd
 
 from assets.common import ON_REQUEST_KEY, table_metadata, table_output
 from assets.motion_prior import prior_from_checkpoint
-from assets.metric_tables import failed_camera_checks
+from assets.metric_tables import camera_checks_of
 from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
 from evaluation.method_comparison import METHODS, method_metric_table
@@ -55,7 +55,7 @@ def _priors(fit_checkpoint: dict):
     partitions_def=SEQUENCES,
     group_name="benchmark",
     metadata={**table_metadata("metrics"), ON_REQUEST_KEY: "humancal benchmark"},
-    code_version="11",
+    code_version="12",
     description="The paper's regimes (ext, gt_cameras, init, separate, per_frame_prior, no_prior and the prior "
                 "ablations whose weights exist), and int_ext with the true principal points (a diagnostic), fitted "
                 "and scored on one sequence; convention_floor: the cameras the self-calibration's convention allows "
@@ -65,7 +65,8 @@ def method_tables(context: dg.AssetExecutionContext, config: MethodTableSettings
                   body_model: BodyModelResource, torch_runtime: TorchResource, raw_detections: pd.DataFrame,
                   detections: pd.DataFrame, extrinsics: pd.DataFrame, gt_cameras: pd.DataFrame,
                   gt_poses3d: pd.DataFrame, gt_associations: pd.DataFrame, associations: pd.DataFrame,
-                  skeletons3d: pd.DataFrame, gt_motions: pd.DataFrame, motion_prior_checkpoint: dict) -> dg.Output:
+                  skeletons3d: pd.DataFrame, gt_motions: pd.DataFrame, motion_prior_checkpoint: dict,
+                  run_records: pd.DataFrame) -> dg.Output:
     """Fit every method of ``config.methods`` (``evaluation.method_comparison.METHODS``) and score it."""
     unknown = sorted(set(config.methods) - set(METHODS))
     if unknown:
@@ -75,7 +76,7 @@ def method_tables(context: dg.AssetExecutionContext, config: MethodTableSettings
     if not gt or len(gt_associations) == 0 or len(gt_poses3d) == 0:
         context.log.info(f"{spec.key}: no known cameras, identities or 3D poses: no method rows")
         return table_output(empty_table("metrics"), "metrics", rows=0)
-    failed = failed_camera_checks(context)
+    failed = camera_checks_of(run_records, context.log)
     dense, lifted = lifted_from_table(detections)
     with torch_runtime.applied():
         table = method_metric_table(

@@ -30,6 +30,10 @@ Tables:
     stage_timings: wall seconds of the latest materialization of each per-sequence asset (sequence = the partition
                   key, asset, step, seconds, run_id, materialized_at); asset ``total`` sums the distinct steps from
                   ``detections`` to ``metric_tables`` (run_id, materialized_at null).
+    run_records:  what the latest runs recorded of a sequence's stages, one row per asset (sequence, asset,
+                  seconds, run_id, failed_checks): ``seconds`` its ``seconds_total`` metadata (null: unrecorded),
+                  ``failed_checks`` the checks its cameras failed (comma-separated; empty: none; ``unchecked``:
+                  never recorded; null for assets without camera checks).
 """
 
 from __future__ import annotations
@@ -217,6 +221,15 @@ SCHEMAS: dict[str, pa.Schema] = {
             ("materialized_at", pa.timestamp("us", tz="UTC")),
         ]
     ),
+    "run_records": pa.schema(
+        [
+            ("sequence", pa.string()),
+            ("asset", pa.string()),
+            ("seconds", pa.float64()),
+            ("run_id", pa.string()),
+            ("failed_checks", pa.string()),
+        ]
+    ),
 }
 """The declared schema of every canonical table, by table name."""
 
@@ -228,6 +241,7 @@ NULLABLE_COLUMNS: dict[str, frozenset[str]] = {
     "metrics": frozenset({"view", "failed_checks"}),
     "benchmark": frozenset({"sequence", "paper_table", "failed_checks"}),
     "stage_timings": frozenset({"run_id", "materialized_at"}),
+    "run_records": frozenset({"seconds", "run_id", "failed_checks"}),
 }
 """Columns that may hold nulls (every other column of every table must be filled), by table name. In pandas a
 nullable integer column is a nullable ``Int32`` column (``pd.NA`` for null)."""

@@ -16,6 +16,7 @@ from assets.metric_tables import metric_tables
 from assets.mocap import mocap_clips
 from assets.motion_prior import PriorEvaluationSettings, build_motion_prior_assets
 from assets.registry import sequence_registry
+from assets.run_records import run_records
 from assets.sequence_inputs import sequence_inputs
 from humancal.lifter import LifterConfig
 from humancal.prior import PriorConfig
@@ -28,7 +29,8 @@ from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFa
 from resources.torch import TorchResource
 
 PER_SEQUENCE_ASSETS = [sequence_inputs, gt_camera_triangulation, gt_camera_association, detections, intrinsics,
-                       extrinsics, association, body_fit, final_cameras, metric_tables, method_tables]
+                       extrinsics, association, body_fit, final_cameras, run_records, metric_tables,
+                       method_tables]
 """Assets partitioned by sequence (select them with ``--select 'group:sequence'``)."""
 
 SHARED_ASSETS = [sequence_registry, mocap_clips]

@@ -20,8 +20,7 @@ from tests.pipelines.test_calibration_assets import SCENE, _stand_in_table
 PARTITION = "synthetic__calib"
 ASSETS = ["raw_detections", "views", "gt_cameras", "gt_poses3d", "gt_associations", "gt_people", "gt_motions",
           "gt_camera_triangulation", "gt_camera_associations", "gt_camera_skeletons3d", "associations", "skeletons3d",
-          "fitted_motions", "refined_cameras", "metric_tables",
-          "method_tables"]
+          "fitted_motions", "refined_cameras", "run_records", "metric_tables", "method_tables"]
 FIT = {"iterations_3d": 150, "iterations_global": 5, "iterations_body": 10, "iterations_cameras": 5}
 METHODS = ["separate", "int_ext_no_bundle", "no_prior"]
 """A shorter fit than the default (the test checks the wiring and sane figures; ``tests/humancal/fitting`` and
@@ -104,6 +103,29 @@ def test_association_metric_rows(materialized):
         assert 0 < rows["seconds"] < 60
     # the ground-truth camera rows are not figures of the estimated cameras: no failed-checks mark
     assert metrics.loc[metrics["method"] == "association_gt_cameras", "failed_checks"].isna().all()
+
+
+def test_run_records_hand_the_stages_seconds_and_checks_to_the_metric_tables(materialized):
+    """The seconds in the metric tables are those the stages recorded, read once by ``run_records`` (an input of
+    the metric assets, which read no instance); extrinsics written outside the graph have no recorded checks."""
+    result, storage, _, defs = materialized
+    graph = defs.resolve_asset_graph()
+    for table in ("metric_tables", "method_tables"):
+        assert dg.AssetKey("run_records") in graph.get(dg.AssetKey(table)).parent_keys, table
+    meta = {e.materialization.asset_key.to_user_string(): e.materialization.metadata
+            for e in result.get_asset_materialization_events()}
+    records = _read(storage, "run_records").set_index("asset")
+    assert list(records.index) == ["extrinsics", "associations", "gt_camera_associations", "fitted_motions"]
+    assert records.loc["extrinsics", "failed_checks"] == "unchecked"
+    metrics = _read(storage, "metric_tables")
+    for asset, method in (("associations", "association"), ("gt_camera_associations", "association_gt_cameras"),
+                          ("fitted_motions", "int_ext")):
+        seconds = records.loc[asset, "seconds"]
+        assert seconds == pytest.approx(meta[asset]["seconds_total"].value) and seconds > 0, asset
+        assert records.loc[asset, "run_id"] == result.run_id, asset
+        row = metrics[(metrics["method"] == method) & (metrics["metric"] == "seconds") & metrics["view"].isna()]
+        assert row["value"].item() == pytest.approx(seconds), method
+    assert (metrics.loc[metrics["method"] == "int_ext", "failed_checks"].dropna() == "unchecked").all()
 
 
 def test_fitted_motions_and_body_metric_rows(materialized):

@@ -17,7 +17,7 @@ import pipelines.cli as cli
 import pipelines.definitions
 from assets.checks import latest_check_outcomes
 from assets.common import sequence_asset
-from assets.metric_tables import failed_camera_checks
+from assets.run_records import recorded_failed_checks
 from evaluation.camera_metrics import camera_metrics_table
 from humancal.camera import Camera
 from pipelines.partitions import SEQUENCES
@@ -212,7 +212,7 @@ def test_metric_rows_of_cameras_that_failed_a_check_name_it(defs, instance, caps
     update(defs, instance)  # extrinsics of both partitions, with their checks
 
     def flags(partition):
-        return failed_camera_checks(dg.build_asset_context(partition_key=partition, instance=instance))
+        return recorded_failed_checks(instance, partition)
 
     assert flags(BELOW) == "focal_constrained,rig_geometry" and flags(LOOSE) == "floor_found"
     assert flags("toy__never") == "unchecked"  # no recorded checks is not a pass
