@@ -23,7 +23,7 @@ from humancal.lifter import (
 )
 from humancal.retarget import motions_table_to_clips
 from resources.io_managers import checkpoint_content_version
-from resources.lifter_source import active_lifter
+from resources.lifter_source import ActiveLifter, active_lifter
 from resources.torch import TorchResource
 
 HELD_OUT_SEQUENCE = "held_out_" + "_".join(HELD_OUT_CMU_SUBJECTS)
@@ -65,7 +65,11 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
         config: training configuration of ``lifter_trained`` (its digest is part of that asset's code version).
         storage_root: the artifacts root where ``lifter_trained`` is stored.
     """
-    active = active_lifter(storage_root)
+    return [_lifter_trained(config), _lifter_checkpoint(active_lifter(storage_root)), lifter_heldout_metrics]
+
+
+def _lifter_trained(config: LifterConfig) -> dg.AssetsDefinition:
+    """``lifter_trained``: the lifter trained here with ``config`` (on request)."""
 
     @dg.asset(
         group_name="lifter",
@@ -117,6 +121,12 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
             history=picture,
         )
 
+    return lifter_trained
+
+
+def _lifter_checkpoint(active: ActiveLifter) -> dg.AssetsDefinition:
+    """``lifter_checkpoint``: the lifter in force (``active``)."""
+
     @dg.asset(
         group_name="lifter",
         io_manager_key="checkpoint_io_manager",
@@ -146,28 +156,30 @@ def build_lifter_assets(config: LifterConfig, storage_root: str) -> list[dg.Asse
             held_out_subjects=", ".join(checkpoint["val_subjects"]),
         )
 
-    @dg.asset(
-        group_name="lifter",
-        metadata=table_metadata("metrics"),
-        code_version="1",
-        automation_condition=UPDATE_CONDITION,
-    )
-    def lifter_heldout_metrics(
-        context: dg.AssetExecutionContext, mocap_clips: pd.DataFrame, lifter_checkpoint: dict
-    ) -> dg.Output:
-        """The lifter on fresh samples of the held-out CMU subjects: MPJPE, PA-MPJPE, height error (mm), by visibility."""
-        _, val = split_held_out(_subject_clips(mocap_clips))
-        report = held_out_report(load_lifter(lifter_checkpoint), val)
-        rows = []
-        for group, suffix in _GROUP_SUFFIX.items():
-            if group not in report.index:
-                continue
-            r = report.loc[group]
-            rows += [MetricRow(metric + suffix, float(r[column]), "mm") for metric, column in _HELD_OUT_METRICS]
-            rows.append(MetricRow("share_pct" + suffix, float(r["share_pct"]), "%"))
-        table = metrics_table("cmu_mocap", HELD_OUT_SEQUENCE, "lifter", rows)
-        context.log.info(report.to_string(float_format=lambda v: f"{v:.1f}"))
-        return table_output(table, "metrics", rows=len(table),
-                            summary=dg.MetadataValue.md(report.to_markdown(floatfmt=".1f")))
+    return lifter_checkpoint
 
-    return [lifter_trained, lifter_checkpoint, lifter_heldout_metrics]
+
+@dg.asset(
+    group_name="lifter",
+    metadata=table_metadata("metrics"),
+    code_version="1",
+    automation_condition=UPDATE_CONDITION,
+)
+def lifter_heldout_metrics(
+    context: dg.AssetExecutionContext, mocap_clips: pd.DataFrame, lifter_checkpoint: dict
+) -> dg.Output:
+    """The lifter on fresh samples of the held-out CMU subjects: MPJPE, PA-MPJPE, height error (mm), by visibility."""
+    _, val = split_held_out(_subject_clips(mocap_clips))
+    report = held_out_report(load_lifter(lifter_checkpoint), val)
+    rows = []
+    for group, suffix in _GROUP_SUFFIX.items():
+        if group not in report.index:
+            continue
+        r = report.loc[group]
+        rows += [MetricRow(metric + suffix, float(r[column]), "mm") for metric, column in _HELD_OUT_METRICS]
+        rows.append(MetricRow("share_pct" + suffix, float(r["share_pct"]), "%"))
+    table = metrics_table("cmu_mocap", HELD_OUT_SEQUENCE, "lifter", rows)
+    context.log.info(report.to_string(float_format=lambda v: f"{v:.1f}"))
+    return table_output(table, "metrics", rows=len(table),
+                        summary=dg.MetadataValue.md(report.to_markdown(floatfmt=".1f")))
+

@@ -37,7 +37,7 @@ from humancal.prior.weights import PriorWeightsError
 from humancal.retarget import motions_table_to_clips
 from resources.body_model import BodyModelResource
 from resources.io_managers import checkpoint_content_version
-from resources.prior_source import active_prior, shipped_active_prior
+from resources.prior_source import ActivePrior, active_prior, shipped_active_prior
 from resources.torch import TorchResource
 
 PRIOR_VARIANT_PARTITIONS = dg.StaticPartitionsDefinition(list(PRIOR_VARIANTS))
@@ -122,6 +122,13 @@ def build_motion_prior_assets(
         raise ValueError(f"build_motion_prior_assets: train_workers={train_workers!r} must be a positive integer "
                          f"dividing every variant's batch_size (not: {undivided})")
 
+    active = active_prior(storage_root) if storage_root is not None else shipped_active_prior()
+    return [_motion_prior_trained(configs, train_workers), _prior_metrics(evaluation), _motion_prior_checkpoint(active)]
+
+
+def _motion_prior_trained(configs: Mapping[str, PriorConfig], train_workers: int) -> dg.AssetsDefinition:
+    """``motion_prior_trained``: one variant's prior trained here with its configuration (on request)."""
+
     @dg.asset(
         group_name="motion_prior",
         partitions_def=PRIOR_VARIANT_PARTITIONS,
@@ -162,6 +169,12 @@ def build_motion_prior_assets(
             **pictures,
         )
 
+    return motion_prior_trained
+
+
+def _prior_metrics(evaluation: PriorEvaluationSettings) -> dg.AssetsDefinition:
+    """``prior_metrics``: one variant's held-out figures, with the denoising benchmark of size ``evaluation``."""
+
     @dg.asset(
         group_name="motion_prior",
         partitions_def=PRIOR_VARIANT_PARTITIONS,
@@ -187,7 +200,11 @@ def build_motion_prior_assets(
         return table_output(table, "metrics", rows=len(table),
                             summary=dg.MetadataValue.md(summary.to_markdown(floatfmt=".1f")))
 
-    active = active_prior(storage_root) if storage_root is not None else shipped_active_prior()
+    return prior_metrics
+
+
+def _motion_prior_checkpoint(active: ActivePrior) -> dg.AssetsDefinition:
+    """``motion_prior_checkpoint``: the prior in force (``active``)."""
 
     @dg.asset(
         group_name="motion_prior",
@@ -208,7 +225,7 @@ def build_motion_prior_assets(
                                 train_subjects=", ".join(checkpoint["train_subjects"]),
                                 held_out_subjects=", ".join(checkpoint["val_subjects"]))
 
-    return [motion_prior_trained, prior_metrics, motion_prior_checkpoint]
+    return motion_prior_checkpoint
 
 
 def prior_metric_rows(prior: MotionVAE, variant: str, held_out_clips: list, body, evaluation: PriorEvaluationSettings,
