@@ -8,13 +8,14 @@ the floor that self-calibration is compared against.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from humancal.associations import Associations
 from humancal.camera import Camera
+from humancal.config import Config, at_least, in_range, positive
 from humancal.detections import detections_to_dense
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
@@ -25,7 +26,7 @@ __all__ = ["TriangulationConfig", "triangulate_identified"]
 
 
 @dataclass(frozen=True)
-class TriangulationConfig:
+class TriangulationConfig(Config):
     """Settings of the identified-detections triangulation.
 
     Attributes:
@@ -35,9 +36,9 @@ class TriangulationConfig:
             are dropped for that joint and the joint is solved again (None disables the pass).
     """
 
-    min_score: float = 0.1
-    min_views: int = 2
-    outlier_threshold_px: float | None = 40.0
+    min_score: float = field(default=0.1, metadata=in_range(0, 1))
+    min_views: int = field(default=2, metadata=at_least(2, integer=True))
+    outlier_threshold_px: float | None = field(default=40.0, metadata=positive(optional=True))
 
 
 def triangulate_identified(

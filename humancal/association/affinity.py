@@ -27,12 +27,13 @@ are given (:meth:`PairAffinities.matrix`). Everything is vectorised over all cro
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from humancal.association.detection_geometry import DetectionGeometry, detection_geometry
 from humancal.camera import CameraRig
+from humancal.config import Config, at_least, in_range, positive
 from humancal.detections import DenseDetections
 from humancal.geometry.alignment import best_rotation_trace
 from humancal.keypoints import NUM_JOINTS
@@ -57,7 +58,7 @@ _CHUNK_PAIRS = 16384
 
 
 @dataclass(frozen=True)
-class AffinityConfig:
+class AffinityConfig(Config):
     """Weights and scales of the affinity (defaults: the paper's weights; scales set on synthetic scenes,
     ``docs/association.md``).
 
@@ -78,35 +79,24 @@ class AffinityConfig:
         min_common_joints: a pair (or a detection and a track) sharing fewer joints has affinity 0.
     """
 
-    geometric_weight: float = 0.7
-    pose_weight: float = 0.3
-    ray_distance_scale_m: float = 0.3
-    pose_scale_m: float = 0.25
-    shape_scale_m: float = 0.15
-    position_scale_m: float = 0.5
+    geometric_weight: float = field(default=0.7, metadata=at_least(0))
+    pose_weight: float = field(default=0.3, metadata=at_least(0))
+    ray_distance_scale_m: float = field(default=0.3, metadata=positive())
+    pose_scale_m: float = field(default=0.25, metadata=positive())
+    shape_scale_m: float = field(default=0.15, metadata=positive())
+    position_scale_m: float = field(default=0.5, metadata=positive())
     depth_scale_range: tuple[float, float] = (0.8, 1.25)
-    temporal_scale_m: float = 0.3
-    min_common_joints: int = 3
+    temporal_scale_m: float = field(default=0.3, metadata=positive())
+    min_common_joints: int = field(default=3, metadata=in_range(1, NUM_JOINTS, integer=True))
 
     def __post_init__(self) -> None:
-        for name in ("geometric_weight", "pose_weight"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0.0):
-                raise ValueError(f"AffinityConfig.{name} must be finite and >= 0, got {value}")
+        super().__post_init__()
         if self.geometric_weight + self.pose_weight <= 0.0:
             raise ValueError("AffinityConfig: geometric_weight + pose_weight must be > 0, got 0")
-        for name in ("ray_distance_scale_m", "pose_scale_m", "shape_scale_m", "position_scale_m",
-                     "temporal_scale_m"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0.0):
-                raise ValueError(f"AffinityConfig.{name} must be a positive number of metres, got {value}")
         low, high = self.depth_scale_range
         if not 0.0 < low <= 1.0 <= high < np.inf:
             raise ValueError(f"AffinityConfig.depth_scale_range must be (low, high) with 0 < low <= 1 <= high, "
                              f"got {self.depth_scale_range}")
-        if not 1 <= self.min_common_joints <= NUM_JOINTS:
-            raise ValueError(f"AffinityConfig.min_common_joints must lie in [1, {NUM_JOINTS}], "
-                             f"got {self.min_common_joints}")
 
     @classmethod
     def epipolar_only(cls, **overrides: object) -> AffinityConfig:

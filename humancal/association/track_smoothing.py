@@ -23,12 +23,13 @@ never extrapolated past the ends of what was seen.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import solveh_banded
 
 from humancal.association.cluster_triangulation import normal_equations, reprojection_errors_px
+from humancal.config import Config, at_least, positive
 
 __all__ = ["SmoothingConfig", "smooth_tracks"]
 
@@ -41,7 +42,7 @@ definite where a joint has no data at all, without moving anything measurable.""
 
 
 @dataclass(frozen=True)
-class SmoothingConfig:
+class SmoothingConfig(Config):
     """Settings of :func:`smooth_tracks` (defaults chosen on synthetic scenes, ``docs/association.md``).
 
     Attributes:
@@ -54,20 +55,10 @@ class SmoothingConfig:
     """
 
     enabled: bool = True
-    scale_px: float = 6.0
-    acceleration_mps2: float = 30.0
-    iterations: int = 2
-    max_fill_frames: int = 5
-
-    def __post_init__(self) -> None:
-        for name in ("scale_px", "acceleration_mps2"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"SmoothingConfig.{name} must be a positive number, got {value}")
-        for name, low in (("iterations", 1), ("max_fill_frames", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-                raise ValueError(f"SmoothingConfig.{name} must be an integer >= {low}, got {value}")
+    scale_px: float = field(default=6.0, metadata=positive())
+    acceleration_mps2: float = field(default=30.0, metadata=positive())
+    iterations: int = field(default=2, metadata=at_least(1, integer=True))
+    max_fill_frames: int = field(default=5, metadata=at_least(0, integer=True))
 
 
 def _gap_fill(order_key: np.ndarray, known: np.ndarray, values: np.ndarray, max_gap: int,

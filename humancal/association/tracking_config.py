@@ -6,17 +6,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
-import numpy as np
-
 from humancal.association.affinity import AffinityConfig
 from humancal.association.cycle_matching import MatchingConfig
 from humancal.association.track_smoothing import SmoothingConfig
+from humancal.config import Config, at_least, in_range, positive
 
 __all__ = ["TrackingConfig"]
 
 
 @dataclass(frozen=True)
-class TrackingConfig:
+class TrackingConfig(Config):
     """Settings of :func:`associate` (defaults chosen on synthetic scenes, ``docs/association.md``).
 
     Attributes:
@@ -51,45 +50,26 @@ class TrackingConfig:
     affinity: AffinityConfig = field(default_factory=AffinityConfig)
     matching: MatchingConfig = field(default_factory=MatchingConfig)
     smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
-    match_threshold: float = 0.3
+    match_threshold: float = field(default=0.3, metadata=in_range(0, 1))
     temporal: bool = True
-    fps: float = 30.0
-    reid_window_s: float = 3.0
-    assign_distance_m: float = 0.75
-    reid_speed_mps: float = 1.5
-    bone_tolerance: float = 0.2
-    min_views: int = 2
-    min_track_s: float = 0.3
-    stitch_window_s: float = 20.0
-    outlier_threshold_px: float = 25.0
-    merge_distance_m: float = 0.4
+    fps: float = field(default=30.0, metadata=positive())
+    reid_window_s: float = field(default=3.0, metadata=at_least(0))
+    assign_distance_m: float = field(default=0.75, metadata=positive())
+    reid_speed_mps: float = field(default=1.5, metadata=at_least(0))
+    bone_tolerance: float = field(default=0.2, metadata=positive())
+    min_views: int = field(default=2, metadata=at_least(2, integer=True))
+    min_track_s: float = field(default=0.3, metadata=at_least(0))
+    stitch_window_s: float = field(default=20.0, metadata=at_least(0))
+    outlier_threshold_px: float = field(default=25.0, metadata=positive())
+    merge_distance_m: float = field(default=0.4, metadata=at_least(0))
     complete_clusters: bool = True
-    num_people: int | None = None
+    num_people: int | None = field(default=None, metadata=at_least(1, integer=True, optional=True))
 
     def __post_init__(self) -> None:
-        if not isinstance(self.affinity, AffinityConfig):
-            raise ValueError(f"TrackingConfig.affinity must be an AffinityConfig, got {type(self.affinity).__name__}")
-        if not isinstance(self.matching, MatchingConfig):
-            raise ValueError(f"TrackingConfig.matching must be a MatchingConfig, got {type(self.matching).__name__}")
-        if not isinstance(self.smoothing, SmoothingConfig):
-            raise ValueError(f"TrackingConfig.smoothing must be a SmoothingConfig, got {type(self.smoothing).__name__}")
-        if not 0.0 <= self.match_threshold <= 1.0:
-            raise ValueError(f"TrackingConfig.match_threshold must lie in [0, 1], got {self.match_threshold}")
-        for name in ("fps", "assign_distance_m", "bone_tolerance", "outlier_threshold_px"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"TrackingConfig.{name} must be a positive number, got {value}")
-        for name in ("reid_window_s", "reid_speed_mps", "min_track_s", "stitch_window_s", "merge_distance_m"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"TrackingConfig.{name} must be a number >= 0, got {value}")
-        if isinstance(self.min_views, bool) or not isinstance(self.min_views, (int, np.integer)) or self.min_views < 2:
-            raise ValueError(f"TrackingConfig.min_views must be an integer >= 2, got {self.min_views}")
-        if self.num_people is not None and (isinstance(self.num_people, bool)
-                                            or not isinstance(self.num_people, (int, np.integer))
-                                            or self.num_people < 1):
-            raise ValueError(f"TrackingConfig.num_people must be None (estimate it) or an integer >= 1, "
-                             f"got {self.num_people}")
+        for name, kind in (("affinity", AffinityConfig), ("matching", MatchingConfig), ("smoothing", SmoothingConfig)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"TrackingConfig.{name} must be a {kind.__name__}, got {type(getattr(self, name)).__name__}")
+        super().__post_init__()
 
     @property
     def matching_config(self) -> MatchingConfig:

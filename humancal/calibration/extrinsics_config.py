@@ -4,7 +4,7 @@ step, the cameras, and what each step found along the way (per view, per view pa
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -13,12 +13,13 @@ from humancal.calibration.floor import FloorAlignment
 from humancal.calibration.lens import LensChoice
 from humancal.calibration.view_agreement import AgreementConfig
 from humancal.camera import Camera
+from humancal.config import Config, at_least, in_range, positive
 
 __all__ = ["ExtrinsicsConfig", "ExtrinsicsDiagnostics", "ExtrinsicsEstimate"]
 
 
 @dataclass(frozen=True)
-class ExtrinsicsConfig:
+class ExtrinsicsConfig(Config):
     """Settings of :func:`estimate_extrinsics`.
 
     Attributes:
@@ -88,8 +89,8 @@ class ExtrinsicsConfig:
         lens_min_gain: relative decrease of the held-out reprojection score a richer lens needs to be taken.
     """
 
-    rotation_threshold_deg: float = 10.0
-    max_pose_error_m: float = 0.15
+    rotation_threshold_deg: float = field(default=10.0, metadata=in_range(0, 90, low_open=True, high_open=True))
+    max_pose_error_m: float = field(default=0.15, metadata=positive())
     max_frames_per_pair: int = 200
     max_pair_hypotheses: int = 150_000
     min_pair_support: int = 5
@@ -97,68 +98,48 @@ class ExtrinsicsConfig:
     linear_max_rel_std: float = 0.15
     single_view_min_rel_std: float = 0.3
     focal_range_rel: tuple[float, float] = (0.15, 5.0)
-    max_groups: int = 200
-    shape_std_m: float = 0.5
-    person_scale_std: float | None = 0.1
+    max_groups: int = field(default=200, metadata=at_least(3, integer=True))
+    shape_std_m: float = field(default=0.5, metadata=positive())
+    person_scale_std: float | None = field(default=0.1, metadata=positive(optional=True))
     bundle_iterations: int = 40
-    max_focal_rel_std: float = 0.05
+    max_focal_rel_std: float = field(default=0.05, metadata=positive())
     square_pixels: bool = True
     align_floor: bool = True
-    upright_threshold: float = 0.5
+    upright_threshold: float = field(default=0.5, metadata=in_range(0, 1))
     seed: int = 0
     fov_range_deg: tuple[float, float] = (10.0, 140.0)
     blind_start_fov_deg: tuple[float, ...] = (50.0, 65.0, 80.0, 95.0, 115.0)
     blind_start_iterations: int = 12
-    mismatch_threshold_sigma: float = 10.0
-    mismatch_max_fraction: float = 0.2
-    mismatch_rounds: int = 2
-    regroup_max_frames: int = 150
-    regroup_min_gain: float = 1.0
+    mismatch_threshold_sigma: float = field(default=10.0, metadata=at_least(0))
+    mismatch_max_fraction: float = field(default=0.2, metadata=in_range(0, 1, low_open=True))
+    mismatch_rounds: int = field(default=2, metadata=at_least(0, integer=True))
+    regroup_max_frames: int = field(default=150, metadata=at_least(0, integer=True))
+    regroup_min_gain: float = field(default=1.0, metadata=at_least(1))
     repair_views: bool = True
     scale_from_limbs: bool = True
-    max_loo_sigma: float = 3.0
-    min_explained_fraction: float = 0.75
+    max_loo_sigma: float = field(default=3.0, metadata=positive())
+    min_explained_fraction: float = field(default=0.75, metadata=in_range(0, 1))
     lens_models: tuple[str, ...] = ("k1",)
     principal_point: str = "centre"
-    lens_min_gain: float = 0.02
+    lens_min_gain: float = field(default=0.02, metadata=in_range(0, 1, high_open=True))
 
     def agreement(self) -> AgreementConfig:
         """The thresholds of the views' agreement."""
         return AgreementConfig(max_loo_sigma=self.max_loo_sigma, min_explained=self.min_explained_fraction)
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.rotation_threshold_deg < 90.0:
-            raise ValueError(f"ExtrinsicsConfig.rotation_threshold_deg={self.rotation_threshold_deg} not in (0, 90)")
-        if self.max_groups < 3:
-            raise ValueError(f"ExtrinsicsConfig.max_groups={self.max_groups} must be >= 3")
+        super().__post_init__()
         if not 0.0 < self.focal_range_rel[0] < self.focal_range_rel[1]:
             raise ValueError(f"ExtrinsicsConfig.focal_range_rel={self.focal_range_rel} must be 0 < low < high")
         if not 0.0 < self.fov_range_deg[0] < self.fov_range_deg[1] < 180.0:
             raise ValueError(f"ExtrinsicsConfig.fov_range_deg={self.fov_range_deg} must be 0 < narrowest < widest "
                              "< 180 degrees")
-        if not (self.mismatch_threshold_sigma >= 0.0 and 0.0 < self.mismatch_max_fraction <= 1.0
-                and self.mismatch_rounds >= 0):
-            raise ValueError(f"ExtrinsicsConfig: mismatch_threshold_sigma={self.mismatch_threshold_sigma} must be >= 0 "
-                             f"(0: off), mismatch_max_fraction={self.mismatch_max_fraction} in (0, 1], "
-                             f"mismatch_rounds={self.mismatch_rounds} >= 0")
-        if isinstance(self.regroup_max_frames, bool) or not isinstance(self.regroup_max_frames, (int, np.integer)) \
-                or self.regroup_max_frames < 0:
-            raise ValueError(f"ExtrinsicsConfig.regroup_max_frames={self.regroup_max_frames!r} must be an integer >= 0 "
-                             "(0: off)")
         if not self.lens_models or any(m not in ("pinhole", "k1", "k1k2") for m in self.lens_models):
             raise ValueError(f"ExtrinsicsConfig.lens_models={self.lens_models!r} must name one or more of 'pinhole', "
                              "'k1', 'k1k2' (simplest first)")
         if self.principal_point not in ("auto", "centre", "estimate"):
             raise ValueError(f"ExtrinsicsConfig.principal_point={self.principal_point!r} must be 'auto', 'centre' or "
                              "'estimate'")
-        if not (np.isfinite(self.lens_min_gain) and 0.0 <= self.lens_min_gain < 1.0):
-            raise ValueError(f"ExtrinsicsConfig.lens_min_gain={self.lens_min_gain} must be in [0, 1)")
-        if not (np.isfinite(self.regroup_min_gain) and self.regroup_min_gain >= 1.0):
-            raise ValueError(f"ExtrinsicsConfig.regroup_min_gain={self.regroup_min_gain} must be a number >= 1")
-
-    def replace(self, **changes) -> ExtrinsicsConfig:
-        """A validated copy with some fields changed."""
-        return replace(self, **changes)
 
 
 @dataclass(frozen=True)

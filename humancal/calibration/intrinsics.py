@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -39,6 +39,7 @@ from humancal.calibration.types import (
     plumb_points,
 )
 from humancal.calibration.vanishing import VanishingPoint, fit_vertical_vanishing_point
+from humancal.config import Config, at_least, in_range, positive
 from humancal.detections import DenseDetections
 
 __all__ = ["IntrinsicsConfig", "IntrinsicsEstimate", "estimate_intrinsics", "upright_candidates"]
@@ -47,7 +48,7 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class IntrinsicsConfig:
+class IntrinsicsConfig(Config):
     """Settings of :func:`estimate_intrinsics`.
 
     Attributes:
@@ -72,28 +73,25 @@ class IntrinsicsConfig:
         seed: RANSAC seed.
     """
 
-    upright_threshold: float = 0.5
+    upright_threshold: float = field(default=0.5, metadata=in_range(0, 1))
     plumb_top: str = "shoulders"
     plumb_bottom: str = "ankles"
-    min_joint_score: float = 0.3
-    min_line_length_px: float = 30.0
-    angle_threshold_deg: float = 2.0
-    ransac_iterations: int = 1000
-    max_candidates: int = 1500
+    min_joint_score: float = field(default=0.3, metadata=in_range(0, 1))
+    min_line_length_px: float = field(default=30.0, metadata=at_least(0))
+    angle_threshold_deg: float = field(default=2.0, metadata=in_range(0, 45, low_open=True, high_open=True))
+    ransac_iterations: int = field(default=1000, metadata=positive(integer=True))
+    max_candidates: int = field(default=1500, metadata=positive(integer=True))
     square_pixels: bool = True
     focal_range_rel: tuple[float, float] = (0.15, 5.0)
-    max_focal_rel_uncertainty: float = 0.05
-    lean_std_deg: float = 2.5
-    height_rel_std: float = 0.03
-    min_inliers: int = 6
+    max_focal_rel_uncertainty: float = field(default=0.05, metadata=positive())
+    lean_std_deg: float = field(default=2.5, metadata=positive())
+    height_rel_std: float = field(default=0.03, metadata=positive())
+    min_inliers: int = field(default=6, metadata=at_least(3, integer=True))
     missing_upright: Literal["raise", "defer"] = "raise"
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.upright_threshold <= 1.0:
-            raise ValueError(f"IntrinsicsConfig.upright_threshold={self.upright_threshold} must lie in [0, 1]")
-        if not 0.0 < self.angle_threshold_deg < 45.0:
-            raise ValueError(f"IntrinsicsConfig.angle_threshold_deg={self.angle_threshold_deg} must lie in (0, 45)")
+        super().__post_init__()
         lo, hi = self.focal_range_rel
         if not 0.0 < lo < hi:
             raise ValueError(f"IntrinsicsConfig.focal_range_rel={self.focal_range_rel} must be 0 < low < high")
@@ -104,12 +102,6 @@ class IntrinsicsConfig:
                 f"IntrinsicsConfig plumb line {self.plumb_top!r}/{self.plumb_bottom!r}: top must be one of "
                 f"{list(PLUMB_TOPS)}, bottom one of {list(PLUMB_BOTTOMS)}"
             )
-        if self.min_inliers < 3:
-            raise ValueError(f"IntrinsicsConfig.min_inliers={self.min_inliers} must be >= 3")
-
-    def replace(self, **changes) -> IntrinsicsConfig:
-        """A validated copy with some fields changed."""
-        return replace(self, **changes)
 
 
 @dataclass(frozen=True)

@@ -26,12 +26,13 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from humancal.camera import Camera
+from humancal.config import Config, at_least, in_range, positive
 from humancal.detections import DenseDetections
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import NUM_JOINTS
@@ -44,7 +45,7 @@ VIEW_VERDICTS = ("ok", "disagrees", "unchecked")
 
 
 @dataclass(frozen=True)
-class AgreementConfig:
+class AgreementConfig(Config):
     """Thresholds of :func:`view_agreement`.
 
     Attributes:
@@ -58,21 +59,13 @@ class AgreementConfig:
         min_compared: a view needs at least this many compared keypoints (and detections) to be judged.
     """
 
-    min_score: float = 0.2
-    max_loo_sigma: float = 3.0
-    min_explained: float = 0.6
-    max_behind: float = 0.1
-    match_sigma: float = 5.0
-    min_joints: int = 8
-    min_compared: int = 30
-
-    def __post_init__(self) -> None:
-        for name in ("max_loo_sigma", "match_sigma"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"AgreementConfig.{name}={getattr(self, name)} must be positive")
-        for name in ("min_score", "min_explained", "max_behind"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"AgreementConfig.{name}={getattr(self, name)} must be in [0, 1]")
+    min_score: float = field(default=0.2, metadata=in_range(0, 1))
+    max_loo_sigma: float = field(default=3.0, metadata=positive())
+    min_explained: float = field(default=0.6, metadata=in_range(0, 1))
+    max_behind: float = field(default=0.1, metadata=in_range(0, 1))
+    match_sigma: float = field(default=5.0, metadata=positive())
+    min_joints: int = field(default=8, metadata=in_range(1, NUM_JOINTS, integer=True))
+    min_compared: int = field(default=30, metadata=at_least(1, integer=True))
 
 
 def groups_by_view(groups: Sequence[np.ndarray], view: np.ndarray, num_views: int) -> np.ndarray:

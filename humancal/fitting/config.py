@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields, replace
-from typing import Any
+from dataclasses import dataclass, field
+
+from humancal.config import Config, at_least, in_range, positive
 
 __all__ = ["BodyFitConfig"]
 
-_INTEGER_FIELDS = ("window_frames", "window_overlap", "iterations_3d", "iterations_global", "iterations_body",
-                   "iterations_cameras", "rounds", "bundle_max_frames")
 _CHOICE_FIELDS = {"cameras": ("fixed", "ext", "int_ext"),  # humancal.fitting.cameras.CAMERA_REGIMES
                   "latent_start": ("prior_mean", "reference_pose"),
                   "bundle_solver": ("lm", "lbfgs")}
@@ -17,7 +15,7 @@ _BOOL_FIELDS = ("fit_shape", "refine_k1", "unswap_left_right", "bundle_start")
 
 
 @dataclass(frozen=True)
-class BodyFitConfig:
+class BodyFitConfig(Config):
     """Weights and schedule of a body fit.
 
     The data terms are Geman-McClure robust costs in units of the expected noise: a residual ``r`` costs
@@ -86,71 +84,48 @@ class BodyFitConfig:
             joints through the initial cameras; ``noise_px`` is the error below which a detection is left alone).
     """
 
-    noise_px: float = 15.0
-    robust_scale_px: float = 40.0
-    noise_3d_m: float = 0.03
-    robust_scale_3d_m: float = 0.15
-    weight_latent: float = 1e-3
-    weight_local_linear: float = 100.0
-    weight_local_linear_3d: float = 100.0
-    weight_rest: float = 1e-4
-    weight_shape: float = 1e-2
-    weight_root_smooth: float = 0.1
-    root_smooth_scale_m: float = 0.01
-    weight_seam: float = 100.0
-    window_frames: int = 32
-    window_overlap: int = 6
+    noise_px: float = field(default=15.0, metadata=positive())
+    robust_scale_px: float = field(default=40.0, metadata=positive())
+    noise_3d_m: float = field(default=0.03, metadata=positive())
+    robust_scale_3d_m: float = field(default=0.15, metadata=positive())
+    weight_latent: float = field(default=1e-3, metadata=at_least(0))
+    weight_local_linear: float = field(default=100.0, metadata=at_least(0))
+    weight_local_linear_3d: float = field(default=100.0, metadata=at_least(0))
+    weight_rest: float = field(default=1e-4, metadata=at_least(0))
+    weight_shape: float = field(default=1e-2, metadata=at_least(0))
+    weight_root_smooth: float = field(default=0.1, metadata=at_least(0))
+    root_smooth_scale_m: float = field(default=0.01, metadata=positive())
+    weight_seam: float = field(default=100.0, metadata=at_least(0))
+    window_frames: int = field(default=32, metadata=at_least(4, integer=True))
+    window_overlap: int = field(default=6, metadata=at_least(0, integer=True))
     latent_start: str = "prior_mean"
-    iterations_3d: int = 300
-    half_rate_fraction_3d: float = 0.8
-    iterations_global: int = 10
-    iterations_body: int = 20
-    learning_rate_3d: float = 0.05
+    iterations_3d: int = field(default=300, metadata=at_least(0, integer=True))
+    half_rate_fraction_3d: float = field(default=0.8, metadata=in_range(0, 1))
+    iterations_global: int = field(default=10, metadata=at_least(0, integer=True))
+    iterations_body: int = field(default=20, metadata=at_least(0, integer=True))
+    learning_rate_3d: float = field(default=0.05, metadata=positive())
     fit_shape: bool = True
     cameras: str = "int_ext"
     refine_k1: bool = False
     bundle_start: bool = True
     bundle_solver: str = "lm"
-    bundle_max_frames: int = 300
-    rounds: int = 3
-    iterations_cameras: int = 50
-    weight_camera_prior: float = 1e-6
-    camera_prior_scale_m: float = 0.1
-    weight_interpenetration: float = 0.0
-    contact_scale_m: float = 0.01
+    bundle_max_frames: int = field(default=300, metadata=at_least(1, integer=True))
+    rounds: int = field(default=3, metadata=at_least(0, integer=True))
+    iterations_cameras: int = field(default=50, metadata=at_least(0, integer=True))
+    weight_camera_prior: float = field(default=1e-6, metadata=at_least(0))
+    camera_prior_scale_m: float = field(default=0.1, metadata=positive())
+    weight_interpenetration: float = field(default=0.0, metadata=at_least(0))
+    contact_scale_m: float = field(default=0.01, metadata=positive())
     unswap_left_right: bool = True
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name in _CHOICE_FIELDS:
-                if value not in _CHOICE_FIELDS[f.name]:
-                    raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be one of {list(_CHOICE_FIELDS[f.name])}")
-            elif f.name in _BOOL_FIELDS:
-                if not isinstance(value, bool):
-                    raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be True or False")
-            elif f.name in _INTEGER_FIELDS:
-                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be an integer >= 0")
-            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"BodyFitConfig.{f.name}={value!r} must be a finite number >= 0")
-        for name in ("noise_px", "robust_scale_px", "noise_3d_m", "robust_scale_3d_m", "root_smooth_scale_m",
-                     "camera_prior_scale_m", "contact_scale_m"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"BodyFitConfig.{name} must be > 0")
-        if self.half_rate_fraction_3d > 1:
-            raise ValueError(f"BodyFitConfig.half_rate_fraction_3d={self.half_rate_fraction_3d} must be in [0, 1]")
-        if self.learning_rate_3d <= 0:
-            raise ValueError("BodyFitConfig.learning_rate_3d must be > 0")
-        if self.bundle_max_frames < 1:
-            raise ValueError(f"BodyFitConfig.bundle_max_frames={self.bundle_max_frames} must be >= 1")
-        if self.window_frames < 4 or not 0 <= self.window_overlap < self.window_frames // 2:
+        super().__post_init__()
+        for name, choices in _CHOICE_FIELDS.items():
+            if getattr(self, name) not in choices:
+                raise ValueError(f"BodyFitConfig.{name}={getattr(self, name)!r} must be one of {list(choices)}")
+        for name in _BOOL_FIELDS:
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"BodyFitConfig.{name}={getattr(self, name)!r} must be True or False")
+        if not self.window_overlap < self.window_frames // 2:
             raise ValueError(f"BodyFitConfig: window_frames={self.window_frames} must be >= 4 and window_overlap="
                              f"{self.window_overlap} in [0, window_frames / 2)")
-
-    def replace(self, **changes: Any) -> BodyFitConfig:
-        """A validated copy with some fields changed (ValueError for an unknown field)."""
-        unknown = sorted(set(changes) - {f.name for f in fields(self)})
-        if unknown:
-            raise ValueError(f"BodyFitConfig has no field(s) {unknown}")
-        return replace(self, **changes)

@@ -3,10 +3,11 @@ fragment repair)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from humancal.config import Config, at_least, in_range
 from humancal.grouping.body25 import BODY25_JOINTS, BODY25_LIMBS, BODY25_ROOT, BODY25_TREE_LIMBS
 from humancal.grouping.candidates import CandidateFrame
 from humancal.grouping.merge import BODY25_BONE_LENGTHS_M, MergeConfig, merge_fragments, tree_distances_m
@@ -16,7 +17,7 @@ __all__ = ["GroupingConfig", "GroupedPeople", "group_frame"]
 
 
 @dataclass(frozen=True)
-class GroupingConfig:
+class GroupingConfig(Config):
     """Settings of :func:`group_frame` (the defaults are those tuned on Shelf, ``docs/shelf.md``).
 
     Attributes:
@@ -27,19 +28,11 @@ class GroupingConfig:
         merge: how joint-disjoint fragments are merged (:mod:`humancal.grouping.merge`); ``None``: not at all.
     """
 
-    min_paf_score: float = 0.05
-    min_joints: int = 3
-    min_mean_score: float = 0.2
+    min_paf_score: float = field(default=0.05, metadata=in_range(0, 1, high_open=True))
+    min_joints: int = field(default=3, metadata=at_least(1, integer=True))
+    min_mean_score: float = field(default=0.2, metadata=in_range(0, 1))
     reattach: bool = True
     merge: MergeConfig | None = MergeConfig()
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.min_paf_score < 1.0:
-            raise ValueError(f"GroupingConfig.min_paf_score must lie in [0, 1), got {self.min_paf_score}")
-        if self.min_joints < 1:
-            raise ValueError(f"GroupingConfig.min_joints must be >= 1, got {self.min_joints}")
-        if not 0.0 <= self.min_mean_score <= 1.0:
-            raise ValueError(f"GroupingConfig.min_mean_score must lie in [0, 1], got {self.min_mean_score}")
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,12 @@ Among the hosts that pass, the one whose closest joint pair is nearest (relative
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse.csgraph import shortest_path
 
+from humancal.config import Config, at_least, positive
 from humancal.grouping.candidates import CandidateFrame
 
 __all__ = ["BODY25_BONE_LENGTHS_M", "MergeConfig", "merge_fragments", "tree_distances_m"]
@@ -56,7 +57,7 @@ BODY25_BONE_LENGTHS_M: dict[tuple[int, int], float] = {
 
 
 @dataclass(frozen=True)
-class MergeConfig:
+class MergeConfig(Config):
     """Thresholds of :func:`merge_fragments`.
 
     Attributes:
@@ -69,18 +70,11 @@ class MergeConfig:
             between them in the body tree; longer gaps leave the fragment's place too loosely determined.
     """
 
-    tolerance: float = 1.2
-    margin_px: float = 10.0
-    max_fragment_joints: int = 12
+    tolerance: float = field(default=1.2, metadata=positive())
+    margin_px: float = field(default=10.0, metadata=at_least(0))
+    max_fragment_joints: int = field(default=12, metadata=at_least(1, integer=True))
     max_direct_paf: float = 0.0
-    max_missing_joints: int = 2
-
-    def __post_init__(self) -> None:
-        if self.tolerance <= 0 or self.margin_px < 0 or self.max_fragment_joints < 1 or self.max_missing_joints < 0:
-            raise ValueError(
-                "MergeConfig needs tolerance > 0, margin_px >= 0, max_fragment_joints >= 1, max_missing_joints >= 0; "
-                f"got {self}"
-            )
+    max_missing_joints: int = field(default=2, metadata=at_least(0, integer=True))
 
 
 def tree_distances_m(num_joints: int, bone_lengths_m: dict[tuple[int, int], float]) -> tuple[np.ndarray, np.ndarray]:

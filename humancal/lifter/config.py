@@ -8,30 +8,13 @@ through plain Python values (the form stored in checkpoints).
 
 from __future__ import annotations
 
-import hashlib
-import json
-import math
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from typing import Any
 
+from humancal.config import Config, in_range, ordered_pair
 from humancal.synthetic.config import FOCAL_LIMITS_PX, IMAGE_SIZE_LIMITS_PX, DetectorNoise
 
 __all__ = ["VirtualCameraRanges", "SampleConfig", "LifterConfig", "training_noise"]
-
-
-def _number(owner: str, name: str, value: Any, low: float, high: float, *, integer: bool = False) -> None:
-    kinds = (int,) if integer else (int, float)
-    if isinstance(value, bool) or not isinstance(value, kinds) or not math.isfinite(value) or not low <= value <= high:
-        kind = "an integer" if integer else "a number"
-        raise ValueError(f"{owner}.{name}={value!r} must be {kind} in [{low}, {high}]")
-
-
-def _interval(owner: str, name: str, value: Any, low: float, high: float) -> tuple[float, float]:
-    ok = isinstance(value, (tuple, list)) and len(value) == 2
-    ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-    if not ok or not low <= value[0] <= value[1] <= high:
-        raise ValueError(f"{owner}.{name}={value!r} must be a (min, max) pair with min <= max within [{low}, {high}]")
-    return float(value[0]), float(value[1])
 
 
 def training_noise() -> DetectorNoise:
@@ -44,7 +27,7 @@ def training_noise() -> DetectorNoise:
 
 
 @dataclass(frozen=True)
-class VirtualCameraRanges:
+class VirtualCameraRanges(Config):
     """Random virtual cameras like those of real rigs (``humancal.lifter.cameras``).
 
     Attributes:
@@ -76,11 +59,12 @@ class VirtualCameraRanges:
     distance_range_m: tuple[float, float] = (2.0, 10.0)
     camera_height_range_m: tuple[float, float] = (0.5, 4.0)
     apparent_height_range: tuple[float, float] = (0.1, 0.9)
-    roll_std_deg: float = 4.0
-    truncation_prob: float = 0.2
-    centre_margin_frac: float = 0.1
+    roll_std_deg: float = field(default=4.0, metadata=in_range(0.0, 45.0))
+    truncation_prob: float = field(default=0.2, metadata=in_range(0.0, 1.0))
+    centre_margin_frac: float = field(default=0.1, metadata=in_range(0.0, 1.0))
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         owner = "VirtualCameraRanges"
         (w_lo, h_lo), (w_hi, h_hi) = IMAGE_SIZE_LIMITS_PX
         sizes = self.image_sizes_px
@@ -106,14 +90,11 @@ class VirtualCameraRanges:
             ("camera_height_range_m", 0.0, 20.0),
             ("apparent_height_range", 0.01, 5.0),
         ):
-            object.__setattr__(self, name, _interval(owner, name, getattr(self, name), low, high))
-        _number(owner, "roll_std_deg", self.roll_std_deg, 0.0, 45.0)
-        _number(owner, "truncation_prob", self.truncation_prob, 0.0, 1.0)
-        _number(owner, "centre_margin_frac", self.centre_margin_frac, 0.0, 1.0)
+            object.__setattr__(self, name, ordered_pair(owner, name, getattr(self, name), low, high))
 
 
 @dataclass(frozen=True)
-class SampleConfig:
+class SampleConfig(Config):
     """How training samples are made from 3D motion (``humancal.lifter.data``).
 
     Attributes:
@@ -133,30 +114,26 @@ class SampleConfig:
 
     cameras: VirtualCameraRanges = field(default_factory=VirtualCameraRanges)
     noise: DetectorNoise = field(default_factory=training_noise)
-    frames_per_group: int = 64
-    cameras_per_group: int = 16
-    mirror_prob: float = 0.5
-    root_offset_std_m: float = 0.3
+    frames_per_group: int = field(default=64, metadata=in_range(1, 100_000, integer=True))
+    cameras_per_group: int = field(default=16, metadata=in_range(1, 1_000, integer=True))
+    mirror_prob: float = field(default=0.5, metadata=in_range(0.0, 1.0))
+    root_offset_std_m: float = field(default=0.3, metadata=in_range(0.0, 5.0))
     score_scale_range: tuple[float, float] = (0.6, 1.15)
-    min_joints: int = 4
+    min_joints: int = field(default=4, metadata=in_range(2, 23, integer=True))
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         owner = "SampleConfig"
         if not isinstance(self.cameras, VirtualCameraRanges):
             raise ValueError(f"{owner}.cameras must be a VirtualCameraRanges, got {type(self.cameras).__name__}")
         if not isinstance(self.noise, DetectorNoise):
             raise ValueError(f"{owner}.noise must be a DetectorNoise, got {type(self.noise).__name__}")
-        _number(owner, "frames_per_group", self.frames_per_group, 1, 100_000, integer=True)
-        _number(owner, "cameras_per_group", self.cameras_per_group, 1, 1_000, integer=True)
-        _number(owner, "mirror_prob", self.mirror_prob, 0.0, 1.0)
-        _number(owner, "root_offset_std_m", self.root_offset_std_m, 0.0, 5.0)
-        scale = _interval(owner, "score_scale_range", self.score_scale_range, 0.01, 10.0)
+        scale = ordered_pair(owner, "score_scale_range", self.score_scale_range, 0.01, 10.0)
         object.__setattr__(self, "score_scale_range", scale)
-        _number(owner, "min_joints", self.min_joints, 2, 23, integer=True)
 
 
 @dataclass(frozen=True)
-class LifterConfig:
+class LifterConfig(Config):
     """Network, optimisation and data of one lifter training run (``humancal.lifter.train``).
 
     Attributes:
@@ -177,36 +154,24 @@ class LifterConfig:
         samples: how samples are synthesised.
     """
 
-    width: int = 512
-    num_blocks: int = 2
-    dropout: float = 0.0
-    epochs: int = 40
-    samples_per_epoch: int = 150_000
-    sample_reuse: int = 3
-    batch_size: int = 256
-    learning_rate: float = 2e-3
-    final_lr_factor: float = 0.01
-    weight_decay: float = 1e-4
-    validation_samples: int = 8192
-    seed: int = 0
-    log_every_steps: int = 100
+    width: int = field(default=512, metadata=in_range(8, 8192, integer=True))
+    num_blocks: int = field(default=2, metadata=in_range(0, 32, integer=True))
+    dropout: float = field(default=0.0, metadata=in_range(0.0, 0.9))
+    epochs: int = field(default=40, metadata=in_range(1, 10_000, integer=True))
+    samples_per_epoch: int = field(default=150_000, metadata=in_range(1, 100_000_000, integer=True))
+    sample_reuse: int = field(default=3, metadata=in_range(1, 10_000, integer=True))
+    batch_size: int = field(default=256, metadata=in_range(1, 1_000_000, integer=True))
+    learning_rate: float = field(default=2e-3, metadata=in_range(1e-7, 1.0))
+    final_lr_factor: float = field(default=0.01, metadata=in_range(0.0, 1.0))
+    weight_decay: float = field(default=1e-4, metadata=in_range(0.0, 1.0))
+    validation_samples: int = field(default=8192, metadata=in_range(1, 10_000_000, integer=True))
+    seed: int = field(default=0, metadata=in_range(0, 2**63 - 1, integer=True))
+    log_every_steps: int = field(default=100, metadata=in_range(1, 10_000_000, integer=True))
     samples: SampleConfig = field(default_factory=lambda: SampleConfig(frames_per_group=128))
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         owner = "LifterConfig"
-        _number(owner, "width", self.width, 8, 8192, integer=True)
-        _number(owner, "num_blocks", self.num_blocks, 0, 32, integer=True)
-        _number(owner, "dropout", self.dropout, 0.0, 0.9)
-        _number(owner, "epochs", self.epochs, 1, 10_000, integer=True)
-        _number(owner, "samples_per_epoch", self.samples_per_epoch, 1, 100_000_000, integer=True)
-        _number(owner, "sample_reuse", self.sample_reuse, 1, 10_000, integer=True)
-        _number(owner, "batch_size", self.batch_size, 1, 1_000_000, integer=True)
-        _number(owner, "learning_rate", self.learning_rate, 1e-7, 1.0)
-        _number(owner, "final_lr_factor", self.final_lr_factor, 0.0, 1.0)
-        _number(owner, "weight_decay", self.weight_decay, 0.0, 1.0)
-        _number(owner, "validation_samples", self.validation_samples, 1, 10_000_000, integer=True)
-        _number(owner, "seed", self.seed, 0, 2**63 - 1, integer=True)
-        _number(owner, "log_every_steps", self.log_every_steps, 1, 10_000_000, integer=True)
         if not isinstance(self.samples, SampleConfig):
             raise ValueError(f"{owner}.samples must be a SampleConfig, got {type(self.samples).__name__}")
 
@@ -233,26 +198,6 @@ class LifterConfig:
             log_every_steps=10,
             samples=SampleConfig(frames_per_group=32, cameras_per_group=8),
         )
-
-    def replace(self, **changes: Any) -> LifterConfig:
-        """A validated copy with some fields changed.
-
-        Raises:
-            ValueError: an unknown field, or an invalid value.
-        """
-        unknown = sorted(set(changes) - {f.name for f in fields(self)})
-        if unknown:
-            raise ValueError(f"LifterConfig has no field(s) {unknown}")
-        return replace(self, **changes)
-
-    def digest(self) -> str:
-        """Short hex digest of every field (names a configuration, e.g. in a code version)."""
-        text = json.dumps(self.to_dict(), sort_keys=True, default=str)
-        return hashlib.sha256(text.encode()).hexdigest()[:12]
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict of the config (ints, floats, tuples; safe for ``torch.load(weights_only=True)``)."""
-        return asdict(self)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> LifterConfig:

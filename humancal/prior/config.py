@@ -8,11 +8,11 @@ plain Python values (the form stored in the weights' json sidecar).
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
+
+from humancal.config import Config, in_range, ordered_pair
 
 __all__ = ["PRIOR_VARIANTS", "NUM_PRIOR_BONES", "PriorConfig"]
 
@@ -31,25 +31,8 @@ NUM_PRIOR_BONES = 21
 """Bones the prior models: the 22 posed bones of ``humancal.body.bones`` without the root (bone 0)."""
 
 
-def _number(name: str, value: Any, low: float, high: float, *, integer: bool = False) -> None:
-    kinds = (int,) if integer else (int, float)
-    if isinstance(value, bool) or not isinstance(value, kinds) or not math.isfinite(value) or not low <= value <= high:
-        kind = "an integer" if integer else "a number"
-        raise ValueError(f"PriorConfig.{name}={value!r} must be {kind} in [{low}, {high}]")
-
-
-def _interval(name: str, value: Any, low: float, high: float) -> tuple[float, float]:
-    ok = isinstance(value, (tuple, list)) and len(value) == 2
-    ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-    if not ok or not low <= value[0] <= value[1] <= high:
-        raise ValueError(
-            f"PriorConfig.{name}={value!r} must be a (min, max) pair with min <= max within [{low}, {high}]"
-        )
-    return float(value[0]), float(value[1])
-
-
 @dataclass(frozen=True)
-class PriorConfig:
+class PriorConfig(Config):
     """Network, losses, augmentation and optimisation of one motion-prior training run (``humancal.prior.train``).
 
     Attributes:
@@ -83,50 +66,33 @@ class PriorConfig:
     """
 
     variant: str = "motion_prior"
-    latent_dim: int = 32
-    hidden_size: int = 128
-    head_width: int = 256
-    clip_frames: int = 16
-    epochs: int = 36
-    steps_per_epoch: int = 200
-    batch_size: int = 128
-    learning_rate: float = 2e-3
-    final_lr_factor: float = 0.02
-    weight_decay: float = 1e-5
-    weight_6d: float = 1.0
-    weight_keypoints: float = 100.0
-    weight_kl: float = 1e-3
-    kl_anneal_epochs: int = 5
-    weight_local_linear: float = 0.1
-    resample_prob: float = 0.5
+    latent_dim: int = field(default=32, metadata=in_range(1, 4096, integer=True))
+    hidden_size: int = field(default=128, metadata=in_range(4, 8192, integer=True))
+    head_width: int = field(default=256, metadata=in_range(4, 8192, integer=True))
+    clip_frames: int = field(default=16, metadata=in_range(3, 10_000, integer=True))
+    epochs: int = field(default=36, metadata=in_range(1, 100_000, integer=True))
+    steps_per_epoch: int = field(default=200, metadata=in_range(1, 10_000_000, integer=True))
+    batch_size: int = field(default=128, metadata=in_range(1, 1_000_000, integer=True))
+    learning_rate: float = field(default=2e-3, metadata=in_range(1e-7, 1.0))
+    final_lr_factor: float = field(default=0.02, metadata=in_range(0.0, 1.0))
+    weight_decay: float = field(default=1e-5, metadata=in_range(0.0, 1.0))
+    weight_6d: float = field(default=1.0, metadata=in_range(0.0, 1e6))
+    weight_keypoints: float = field(default=100.0, metadata=in_range(0.0, 1e6))
+    weight_kl: float = field(default=1e-3, metadata=in_range(0.0, 1e6))
+    kl_anneal_epochs: int = field(default=5, metadata=in_range(0, 100_000, integer=True))
+    weight_local_linear: float = field(default=0.1, metadata=in_range(0.0, 1e6))
+    resample_prob: float = field(default=0.5, metadata=in_range(0.0, 1.0))
     speed_range: tuple[float, float] = (0.5, 2.0)
-    reverse_prob: float = 0.5
-    mirror_prob: float = 0.5
-    validation_windows: int = 1024
-    seed: int = 0
+    reverse_prob: float = field(default=0.5, metadata=in_range(0.0, 1.0))
+    mirror_prob: float = field(default=0.5, metadata=in_range(0.0, 1.0))
+    validation_windows: int = field(default=1024, metadata=in_range(1, 10_000_000, integer=True))
+    seed: int = field(default=0, metadata=in_range(0, 2**63 - 1, integer=True))
 
     def __post_init__(self) -> None:
         if self.variant not in PRIOR_VARIANTS:
             raise ValueError(f"PriorConfig.variant={self.variant!r} must be one of {list(PRIOR_VARIANTS)}")
-        _number("latent_dim", self.latent_dim, 1, 4096, integer=True)
-        _number("hidden_size", self.hidden_size, 4, 8192, integer=True)
-        _number("head_width", self.head_width, 4, 8192, integer=True)
-        _number("clip_frames", self.clip_frames, 3, 10_000, integer=True)
-        _number("epochs", self.epochs, 1, 100_000, integer=True)
-        _number("steps_per_epoch", self.steps_per_epoch, 1, 10_000_000, integer=True)
-        _number("batch_size", self.batch_size, 1, 1_000_000, integer=True)
-        _number("learning_rate", self.learning_rate, 1e-7, 1.0)
-        _number("final_lr_factor", self.final_lr_factor, 0.0, 1.0)
-        _number("weight_decay", self.weight_decay, 0.0, 1.0)
-        for name in ("weight_6d", "weight_keypoints", "weight_kl", "weight_local_linear"):
-            _number(name, getattr(self, name), 0.0, 1e6)
-        _number("kl_anneal_epochs", self.kl_anneal_epochs, 0, 100_000, integer=True)
-        _number("resample_prob", self.resample_prob, 0.0, 1.0)
-        object.__setattr__(self, "speed_range", _interval("speed_range", self.speed_range, 0.1, 10.0))
-        _number("reverse_prob", self.reverse_prob, 0.0, 1.0)
-        _number("mirror_prob", self.mirror_prob, 0.0, 1.0)
-        _number("validation_windows", self.validation_windows, 1, 10_000_000, integer=True)
-        _number("seed", self.seed, 0, 2**63 - 1, integer=True)
+        super().__post_init__()
+        object.__setattr__(self, "speed_range", ordered_pair("PriorConfig", "speed_range", self.speed_range, 0.1, 10.0))
 
     # ------------------------------------------------------------------ variant switches
 
@@ -174,24 +140,8 @@ class PriorConfig:
             seed=seed,
         )
 
-    def replace(self, **changes: Any) -> PriorConfig:
-        """A validated copy with some fields changed.
-
-        Raises:
-            ValueError: an unknown field, or an invalid value.
-        """
-        unknown = sorted(set(changes) - {f.name for f in fields(self)})
-        if unknown:
-            raise ValueError(f"PriorConfig has no field(s) {unknown}")
-        return replace(self, **changes)
-
-    def digest(self) -> str:
-        """Short hex digest of every field (names a configuration, e.g. in a code version)."""
-        text = json.dumps(self.to_dict(), sort_keys=True)
-        return hashlib.sha256(text.encode()).hexdigest()[:12]
-
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict of the config (strings, ints, floats, lists: json-safe)."""
+        """Plain dict of the config (strings, ints, floats, lists: json-safe; also what :meth:`digest` hashes)."""
         values = asdict(self)
         values["speed_range"] = list(values["speed_range"])
         return values

@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
+from humancal.config import Config, at_least, positive
 from humancal.retarget.correspondence import DAZ_CMU_LINKS, JointLink
 
 __all__ = ["RetargetConfig"]
 
 
 @dataclass(frozen=True)
-class RetargetConfig:
+class RetargetConfig(Config):
     """How mocap is retargeted onto the body model (``docs/retarget.md``).
 
     Weights are relative to the data term, the weighted sum over mapped points of squared distances in m^2,
@@ -71,49 +72,33 @@ class RetargetConfig:
             subject's fit 11x slower on the 2-core development machine under load (``humancal.retarget.threads``).
     """
 
-    fps: float = 30.0
+    fps: float = field(default=30.0, metadata=positive())
     links: tuple[JointLink, ...] = DAZ_CMU_LINKS
-    shape_frames: int = 96
-    length_iterations: int = 20
-    joint_iterations: int = 15
-    shape_rounds: int = 2
-    shape_iterations: int = 20
+    shape_frames: int = field(default=96, metadata=positive(integer=True))
+    length_iterations: int = field(default=20, metadata=positive(integer=True))
+    joint_iterations: int = field(default=15, metadata=positive(integer=True))
+    shape_rounds: int = field(default=2, metadata=at_least(0, integer=True))
+    shape_iterations: int = field(default=20, metadata=positive(integer=True))
     phenotype_init: tuple[float, ...] = (0.5, 2.0 / 3.0, 0.5, 0.5, 0.3, 0.5)
     phenotype_low: tuple[float, ...] = (0.0, 0.5, 0.0, 0.0, 0.0, 0.0)
     phenotype_high: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
-    phenotype_prior_weight: float = 1e-4
-    offset_prior_weight: float = 1e-2
-    free_offset_prior_weight: float = 1e-5
-    pose_prior_weight: float = 1e-5
+    phenotype_prior_weight: float = field(default=1e-4, metadata=at_least(0))
+    offset_prior_weight: float = field(default=1e-2, metadata=at_least(0))
+    free_offset_prior_weight: float = field(default=1e-5, metadata=at_least(0))
+    pose_prior_weight: float = field(default=1e-5, metadata=at_least(0))
     bone_prior_scale: tuple[tuple[str, float], ...] = (("clavicle.L", 10.0), ("clavicle.R", 10.0))
     hinge_bones: tuple[str, ...] = ("lowerleg01.L", "lowerleg01.R", "lowerarm01.L", "lowerarm01.R")
-    hinge_prior_weight: float = 1e-3
-    pelvis_tilt_prior_weight: float = 1e-3
-    smooth_weight: float = 1e-4
-    chunk_frames: int = 512
-    pose_iterations: int = 4
-    lbfgs_history: int = 20
-    init_child_weight: float = 0.25
-    torch_threads: int | None = 1
+    hinge_prior_weight: float = field(default=1e-3, metadata=at_least(0))
+    pelvis_tilt_prior_weight: float = field(default=1e-3, metadata=at_least(0))
+    smooth_weight: float = field(default=1e-4, metadata=at_least(0))
+    chunk_frames: int = field(default=512, metadata=positive(integer=True))
+    pose_iterations: int = field(default=4, metadata=positive(integer=True))
+    lbfgs_history: int = field(default=20, metadata=positive(integer=True))
+    init_child_weight: float = field(default=0.25, metadata=at_least(0))
+    torch_threads: int | None = field(default=1, metadata=positive(integer=True, optional=True))
 
     def __post_init__(self) -> None:
-        positive_ints = ("shape_frames", "length_iterations", "joint_iterations", "shape_iterations", "chunk_frames",
-                         "pose_iterations", "lbfgs_history")
-        for name in positive_ints:
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < 1:
-                raise ValueError(f"RetargetConfig.{name} must be a positive int, got {value!r}")
-        if self.torch_threads is not None and (not isinstance(self.torch_threads, int) or self.torch_threads < 1):
-            raise ValueError(f"RetargetConfig.torch_threads must be None or a positive int, got {self.torch_threads!r}")
-        if not isinstance(self.shape_rounds, int) or self.shape_rounds < 0:
-            raise ValueError(f"RetargetConfig.shape_rounds must be an int >= 0, got {self.shape_rounds!r}")
-        if not self.fps > 0:
-            raise ValueError(f"RetargetConfig.fps must be positive, got {self.fps!r}")
-        for name in ("phenotype_prior_weight", "offset_prior_weight", "free_offset_prior_weight", "pose_prior_weight",
-                     "hinge_prior_weight", "pelvis_tilt_prior_weight", "smooth_weight", "init_child_weight"):
-            value = getattr(self, name)
-            if not value >= 0:
-                raise ValueError(f"RetargetConfig.{name} must be >= 0, got {value!r}")
+        super().__post_init__()
         for item in self.bone_prior_scale:
             if len(item) != 2 or not isinstance(item[0], str) or not item[1] >= 0:
                 raise ValueError(f"RetargetConfig.bone_prior_scale needs (bone name, factor >= 0) pairs, got {item!r}")

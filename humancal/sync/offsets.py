@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from humancal.config import Config, in_range, positive
 from humancal.detections import detections_to_dense
 from humancal.sync.correlation import ClockTracks, LagPeak, correlate_views, find_peak, pose_distance, resample_tracks
 from humancal.sync.signals import SIGNAL_KINDS, track_signals
@@ -54,7 +55,7 @@ STATUSES: tuple[str, ...] = ("ok", "unchecked", "ambiguous")
 
 
 @dataclass(frozen=True)
-class SyncConfig:
+class SyncConfig(Config):
     """How the offsets are searched for.
 
     Attributes:
@@ -76,32 +77,21 @@ class SyncConfig:
             refined by a parabola instead; the ``"2d"`` signal has no lifted poses and never has one).
     """
 
-    max_offset_s: float = 2.0
+    max_offset_s: float = field(default=2.0, metadata=positive())
     signal: str = "lifted"
-    min_overlap_s: float = 1.0
-    min_peak: float = 0.3
-    min_margin: float = 0.1
-    exclusion_s: float = 0.2
-    tolerance_frames: float = 0.5
-    smooth_s: float = 0.025
-    fine_samples: int = 3
+    min_overlap_s: float = field(default=1.0, metadata=positive())
+    min_peak: float = field(default=0.3, metadata=in_range(0, 1))
+    min_margin: float = field(default=0.1, metadata=in_range(0, 1))
+    exclusion_s: float = field(default=0.2, metadata=positive())
+    tolerance_frames: float = field(default=0.5, metadata=positive())
+    smooth_s: float = field(default=0.025, metadata=in_range(0, 10, high_open=True))
+    fine_samples: int = field(default=3, metadata=in_range(0, 30, integer=True))
     joint_fine: bool = True
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.fine_samples, int) and 0 <= self.fine_samples <= 30):
-            raise ValueError(f"fine_samples: expected an integer in [0, 30], got {self.fine_samples!r}")
-        if not (isinstance(self.smooth_s, (int, float)) and 0 <= self.smooth_s < 10):
-            raise ValueError(f"smooth_s: expected seconds in [0, 10), got {self.smooth_s!r}")
-        for name in ("max_offset_s", "min_overlap_s", "exclusion_s", "tolerance_frames"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: expected a positive number, got {value!r}")
+        super().__post_init__()
         if self.signal not in SIGNAL_KINDS:
-            raise ValueError(f"signal: expected one of {list(SIGNAL_KINDS)}, got {self.signal!r}")
-        for name in ("min_peak", "min_margin"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and 0 <= value <= 1):
-                raise ValueError(f"{name}: expected a number in [0, 1], got {value!r}")
+            raise ValueError(f"SyncConfig.signal must be one of {list(SIGNAL_KINDS)}, got {self.signal!r}")
 
 
 @dataclass(frozen=True)

@@ -143,7 +143,7 @@ def test_the_levenberg_marquardt_bundle_reaches_the_exact_cameras_where_lbfgs_st
     assert np.isnan(sparse.points_world_m[:, 1:4]).all() and np.isnan(sparse.points_world_m[:, 5:8]).all()
     assert np.isfinite(sparse.points_world_m[:, ::4][observations.joints_valid[:, ::4]]).all()
     assert _mean_errors(sparse.cameras, rig)["angle_error_deg"] < 0.01
-    with pytest.raises(ValueError, match="BodyFitConfig.bundle_max_frames=0 must be >= 1"):
+    with pytest.raises(ValueError, match="BodyFitConfig.bundle_max_frames must be an integer >= 1, got 0"):
         BodyFitConfig(bundle_max_frames=0)
     with pytest.raises(ValueError, match="BodyFitConfig.bundle_solver='newton' must be one of"):
         BodyFitConfig(bundle_solver="newton")

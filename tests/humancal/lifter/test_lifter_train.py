@@ -86,9 +86,9 @@ def test_subjects_must_not_be_shared_between_training_and_validation(train_val_c
 def test_config_validation_and_round_trip():
     config = LifterConfig.default()
     assert LifterConfig.from_dict(config.to_dict()) == config
-    with pytest.raises(ValueError, match=r"LifterConfig.width=0 must be an integer in \[8, 8192\]"):
+    with pytest.raises(ValueError, match=r"LifterConfig.width must be an integer in \[8, 8192\], got 0"):
         LifterConfig(width=0)
-    with pytest.raises(ValueError, match=r"LifterConfig.dropout=1.5 must be a number"):
+    with pytest.raises(ValueError, match=r"LifterConfig.dropout must be a number in \[0, 0.9\], got 1.5"):
         config.replace(dropout=1.5)
     with pytest.raises(ValueError, match=r"LifterConfig has no field\(s\) \['widht'\]"):
         config.replace(widht=3)

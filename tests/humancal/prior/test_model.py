@@ -87,7 +87,7 @@ def test_variant_switches():
 def test_config_validation_and_round_trip():
     with pytest.raises(ValueError, match=r"PriorConfig.variant='bidirectional' must be one of"):
         PriorConfig(variant="bidirectional")
-    with pytest.raises(ValueError, match=r"PriorConfig.latent_dim=0 must be an integer"):
+    with pytest.raises(ValueError, match=r"PriorConfig.latent_dim must be an integer in \[1, 4096\], got 0"):
         PriorConfig(latent_dim=0)
     with pytest.raises(ValueError, match=r"PriorConfig.speed_range"):
         PriorConfig(speed_range=(2.0, 0.5))

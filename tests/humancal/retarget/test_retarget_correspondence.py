@@ -141,6 +141,6 @@ def test_config_is_validated():
         RetargetConfig(pose_iterations=0)
     with pytest.raises(ValueError, match="phenotype 1"):
         RetargetConfig(phenotype_init=(0.5, 0.2, 0.5, 0.5, 0.3, 0.5))
-    with pytest.raises(ValueError, match="smooth_weight must be >= 0"):
+    with pytest.raises(ValueError, match="smooth_weight must be a number >= 0"):
         RetargetConfig(smooth_weight=-1.0)
     assert RetargetConfig.tiny().shape_frames < RetargetConfig().shape_frames
