@@ -17,7 +17,7 @@ import tempfile
 import numpy as np
 
 from humancal.viewing.overlays import overlay_alignment, write_overlays
-from pipelines.view_command import capture_view
+from pipelines.cli.view import capture_view
 
 
 def main() -> None:

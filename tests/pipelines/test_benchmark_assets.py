@@ -63,7 +63,7 @@ def test_benchmark_table_reads_the_stored_partitions_and_skips_the_others(tmp_pa
 
 
 def test_benchmark_table_leaves_out_what_the_update_says_and_says_why(tmp_path):
-    from pipelines.benchmark_report import left_out_lines
+    from pipelines.cli.benchmark_report import left_out_lines
 
     storage = str(tmp_path / "artifacts")
     defs = build_definitions(storage, datasets=DatasetsResource(data_dir=str(tmp_path / "no_data")))

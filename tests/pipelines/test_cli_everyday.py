@@ -29,7 +29,7 @@ def test_the_parsers_format_names_are_the_formats_modules():
     from humancal.formats.cameras import CAMERA_READ_FORMATS
     from humancal.formats.detections import COCO_SKELETONS, OPENPOSE_SKELETONS
     from humancal.formats.motions import MOTION_FORMATS
-    from pipelines import format_names
+    from pipelines.cli import format_names
 
     assert format_names.CAMERA_FORMATS == CAMERA_FORMATS and format_names.MOTION_FORMATS == MOTION_FORMATS
     assert format_names.CAMERA_READ_FORMATS == CAMERA_READ_FORMATS

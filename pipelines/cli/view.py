@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 
-from pipelines.export_io import check_out, stored_table
+from pipelines.cli.export_io import check_out, stored_table
 
 CAMERA_KINDS = {"final": "final_cameras", "calibrated": "extrinsics", "refined": "refined_cameras",
                 "reference": "gt_cameras"}
@@ -63,7 +63,7 @@ def capture_view(partition: str, *, meshes: bool = True, videos: list[str] | Non
     from humancal.fitting import FittedMotions
     from humancal.viewing import CaptureView
     from humancal.viewing.reprojection import fitted_keypoints
-    from pipelines.motions_export import _sequence_fps
+    from pipelines.cli.motions import _sequence_fps
 
     views = stored_table("views", partition)
     cameras = {}
@@ -102,7 +102,7 @@ def export_overlays(args) -> int:
     import numpy as np
 
     from humancal.viewing.overlays import write_overlays
-    from pipelines.motions_export import _frame_slice
+    from pipelines.cli.motions import _frame_slice
 
     if args.format != "mp4":
         raise SystemExit("humancal: overlays export supports --format mp4")
@@ -134,7 +134,7 @@ def export_footage(args) -> int:
     from humancal.camera import cameras_from_table
     from humancal.fitting import FittedMotions
     from humancal.viewing.footage import write_footage
-    from pipelines.motions_export import _sequence_fps
+    from pipelines.cli.motions import _sequence_fps
 
     if args.format != "mp4":
         raise SystemExit("humancal: footage export supports --format mp4")

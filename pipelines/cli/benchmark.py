@@ -32,7 +32,7 @@ def run_benchmark(args, cmd_update: Callable, instance_of: Callable, run_config:
     import dagster as dg
 
     from evaluation.method_comparison import METHODS
-    from pipelines.benchmark_report import report_benchmark
+    from pipelines.cli.benchmark_report import report_benchmark
     from pipelines.definitions import defs
     from pipelines.run_guard import run_tags
 

@@ -186,7 +186,7 @@ def _print_failed_checks(result, out: Output, users: set[str]) -> None:
 
 def _demo_table(out: Output, result, args) -> int | None:
     """The demo's figures after the update: the headline table (every headline row with ``--all``)."""
-    from pipelines.demo_headline import headline_lines
+    from pipelines.cli.headline import headline_lines
 
     if result.exit_status:
         if result.blocking_failed:

@@ -1,11 +1,11 @@
 """``humancal export detections|cameras|motions|overlays|footage``: stored artifacts of a partition in other tools'
-formats, under the one rule of :mod:`pipelines.export_io` for where they write.
+formats, under the one rule of :mod:`pipelines.cli.export_io` for where they write.
 """
 
 from __future__ import annotations
 
 
-from pipelines.export_io import check_out, stored_table
+from pipelines.cli.export_io import check_out, stored_table
 
 __all__ = ["CAMERA_ASSETS", "check_out", "cmd_export", "stored_table"]
 
@@ -34,12 +34,12 @@ def _export(args) -> int:
         if given and args.what != "overlays":
             raise SystemExit(f"humancal: {flag} is an option of `export overlays`, not of `export {args.what}`")
     if args.what in ("overlays", "footage"):
-        from pipelines.view_command import export_footage, export_overlays
+        from pipelines.cli.view import export_footage, export_overlays
 
         return export_overlays(args) if args.what == "overlays" else export_footage(args)
     if args.what == "motions":
-        from pipelines.format_names import MOTION_FORMATS
-        from pipelines.motions_export import export_stored_motions
+        from pipelines.cli.format_names import MOTION_FORMATS
+        from pipelines.cli.motions import export_stored_motions
 
         if args.format in MOTION_FORMATS:  # an unknown format is refused with the known ones, below
             check_out(args.out, args.overwrite)

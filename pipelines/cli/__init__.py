@@ -12,7 +12,7 @@
     humancal view --partition P [--save FILE.rrd]   the result in 3D (Rerun)
     humancal train lifter [--discard]    train the lifter here (replaces the shipped weights), or go back to them
     humancal train prior [--variant V]   train a motion prior variant here and compute its held-out figures
-    humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/capture_cli.py)
+    humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/cli/add.py)
     humancal remove NAME [--sequence SEQ]   forget a capture you added: config entry, partitions, artifacts
     humancal ui                          the Dagster UI on 127.0.0.1
     humancal -v COMMAND ...              (or COMMAND -v) also print what was left waiting and why
@@ -21,7 +21,7 @@ All commands share one persistent Dagster instance in ``<state dir>/dagster_home
 so materializations and lineage survive between commands and are visible in the UI.
 
 This module imports only the standard library: the parser (``humancal --help``, argument errors) answers in a
-fraction of a second, and each command imports what it needs (the commands live in ``pipelines/*_command.py``).
+fraction of a second, and each command imports what it needs (the commands live in ``pipelines/cli/<command>.py``).
 """
 
 from __future__ import annotations
@@ -171,8 +171,8 @@ def _explain_missing_tables(missing: list[str]) -> str:
 
 
 def cmd_report(args) -> int:
-    if args.benchmark:  # pipelines/benchmark_report.py
-        from pipelines.benchmark_report import report_benchmark
+    if args.benchmark:  # pipelines/cli/benchmark_report.py
+        from pipelines.cli.benchmark_report import report_benchmark
 
         return report_benchmark(args, _instance)
     # Markdown is for reading: headline rows unless --all; CSV is for tools: every row.
@@ -183,7 +183,7 @@ def cmd_report(args) -> int:
 def cmd_ui(args) -> int:
     home = dagster_home()
     env = dict(os.environ, DAGSTER_HOME=str(home))
-    repo = Path(__file__).resolve().parent.parent
+    repo = Path(__file__).resolve().parents[2]
     # The Dagster of this interpreter's environment, whether or not that environment is activated (a bare
     # `dagster` would be looked up on PATH, and may be missing or another installation).
     argv = [sys.executable, "-m", "dagster", "dev", "-w", "workspace.yaml", "-h", "127.0.0.1", "-p", str(args.port)]
@@ -197,18 +197,18 @@ def cmd_ui(args) -> int:
 
 
 def _command(module: str, name: str):
-    """A command imported when it runs (``pipelines.<module>.<name>``), so that the parser stays light."""
+    """A command imported when it runs (``pipelines.cli.<module>.<name>``), so that the parser stays light."""
     def run(args):
-        return getattr(importlib.import_module(f"pipelines.{module}"), name)(args)
+        return getattr(importlib.import_module(f"pipelines.cli.{module}"), name)(args)
 
     return run
 
 
-cmd_update = _command("update_command", "cmd_update")
-cmd_demo = _command("update_command", "cmd_demo")
-cmd_export = _command("export_command", "cmd_export")
-cmd_train = _command("train_command", "cmd_train")
-cmd_remove = _command("remove_command", "cmd_remove")
+cmd_update = _command("update", "cmd_update")
+cmd_demo = _command("update", "cmd_demo")
+cmd_export = _command("export", "cmd_export")
+cmd_train = _command("train", "cmd_train")
+cmd_remove = _command("remove", "cmd_remove")
 
 WRITES_STATE = {"demo", "update", "add", "remove", "train", "benchmark", "ui"}
 """Commands that write the state dir (checked to be writable before they start)."""
@@ -240,16 +240,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=int, help="training epochs (default: the shipped configuration's)")
     p.add_argument("--discard", action="store_true", help="delete the trained model: the shipped one is in force again")
     p.set_defaults(func=cmd_train)
-    from pipelines.capture_cli import add_parser as add_capture_command  # humancal add NAME --openpose ...
+    from pipelines.cli.add import add_parser as add_capture_command  # humancal add NAME --openpose ...
     add_capture_command(sub)
     p = sub.add_parser("remove", help="forget a capture you added (humancal add): its datasets entry, its "
                                       "partitions and their artifacts")
     p.add_argument("name", help="the dataset name given to `humancal add` (the first half of the partition key)")
     p.add_argument("--sequence", help="remove this sequence only (default: every sequence of the dataset)")
     p.set_defaults(func=cmd_remove)
-    from pipelines.benchmark_command import add_parser as add_benchmark_command  # humancal benchmark --partition P
+    from pipelines.cli.benchmark import add_parser as add_benchmark_command  # humancal benchmark --partition P
     add_benchmark_command(sub, cmd_update, _instance, QUIET_RUN_CONFIG)
-    from pipelines.view_command import add_parser as add_view_command  # humancal view --partition P [--save F]
+    from pipelines.cli.view import add_parser as add_view_command  # humancal view --partition P [--save F]
     add_view_command(sub)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
     p.add_argument("--port", type=int, default=3000)
@@ -261,7 +261,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_export_parser(sub) -> None:
-    from pipelines.format_names import CAMERA_FORMATS, MOTION_FORMATS
+    from pipelines.cli.format_names import CAMERA_FORMATS, MOTION_FORMATS
 
     p = sub.add_parser("export", help="write stored detections, cameras or fitted motions in another tool's format")
     p.add_argument("what", choices=("detections", "cameras", "motions", "overlays", "footage"))
@@ -298,7 +298,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("alembic").setLevel(logging.WARNING)  # Dagster's storage migrations
     try:
         if args.command in WRITES_STATE:
-            from pipelines.state_access import require_writable_state
+            from pipelines.cli.state_access import require_writable_state
 
             require_writable_state()
         return args.func(args)
@@ -306,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"humancal: error: {err}", file=sys.stderr)
         return 2
     except PermissionError as err:  # a read-only state dir or output folder found while writing
-        from pipelines.state_access import permission_message
+        from pipelines.cli.state_access import permission_message
 
         print(permission_message(err), file=sys.stderr)
         return 2
@@ -316,6 +316,3 @@ def main(argv: list[str] | None = None) -> int:
             # thousands of objects: about 0.4 s at exit once Dagster and torch are imported.
             gc.freeze()
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -36,7 +36,7 @@ def headline_lines(partition: str, everything: bool = False) -> list[str]:
     table = cli._stored_metrics([partition], headline_only=True)
     if everything:
         return [_markdown(table)]
-    from pipelines.export_command import final_source
+    from pipelines.cli.export import final_source
 
     source = final_source(partition)
     lines = [f"{partition}: final cameras, who is who and bodies against the ground truth", ""]

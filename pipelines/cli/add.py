@@ -31,7 +31,7 @@ FLAGS = {"image_size": "--image-size", "skeleton": "--skeleton", "cameras_format
 
 def add_parser(subparsers) -> None:
     """Add the ``add`` command to the CLI's subparsers."""
-    from pipelines.format_names import CAMERA_FORMATS, COCO_SKELETONS, OPENPOSE_SKELETONS  # light: --help stays fast
+    from pipelines.cli.format_names import CAMERA_FORMATS, COCO_SKELETONS, OPENPOSE_SKELETONS  # light: --help stays fast
 
     p = subparsers.add_parser(
         "add", help="register your own capture (OpenPose JSON folders or COCO keypoint files, one per view)",
