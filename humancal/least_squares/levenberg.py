@@ -90,6 +90,56 @@ def _as_costs(cost: Any) -> Tensor:
     return values.reshape(-1)
 
 
+@dataclass(frozen=True)
+class _Attempts:
+    """The outcome of one iteration's damped steps (B problems; B = 1 for a single problem).
+
+    Attributes:
+        state: the state with every accepted problem's step (the old state where none was accepted).
+        costs: (B,) float64 costs of ``state``.
+        accept: (B,) bool, which problems accepted a step.
+        lam: (B,) float64 damping after the attempts (grown after every refusal).
+        refused: steps refused, summed over the attempts and problems.
+    """
+
+    state: Any
+    costs: Tensor
+    accept: Tensor
+    lam: Tensor
+    refused: int
+
+
+def _attempt_steps(
+    trial: Callable[[Any, Any, Any], tuple[Any, Any]],
+    state: Any,
+    system: Any,
+    costs: Tensor,
+    lam: Tensor,
+    damping: Damping,
+    select: Callable[[Tensor, Any, Any], Any] | None,
+) -> _Attempts:
+    """Try damped steps from one linearisation until every problem has lowered its cost or the attempts run out."""
+    batched = select is not None
+    accept = torch.zeros(costs.numel(), dtype=torch.bool)
+    new_state, new_costs, refused = state, costs, 0
+    for _ in range(damping.attempts):
+        current = lam if batched else float(lam[0])
+        trial_state, trial_cost = trial(state, system, current)
+        trial_costs = _as_costs(trial_cost)
+        better = torch.isfinite(trial_costs) & (trial_costs < costs) & ~accept
+        if batched:
+            new_state = select(better, trial_state, new_state)
+        elif bool(better[0]):
+            new_state = trial_state
+        new_costs = torch.where(better, trial_costs, new_costs)
+        accept |= better
+        refused += int((~accept).sum())
+        if bool(accept.all()):
+            break
+        lam = torch.where(accept, lam, (lam * damping.grow).clamp(max=damping.ceiling))
+    return _Attempts(new_state, new_costs, accept, lam, refused)
+
+
 def levenberg_marquardt(
     linearize: Callable[[Any], tuple[Any, Any]],
     trial: Callable[[Any, Any, Any], tuple[Any, Any]],
@@ -132,23 +182,9 @@ def levenberg_marquardt(
     lam = torch.full((batch,), damping.start, dtype=torch.float64)
     refused, converged, iterations, fresh = 0, False, 0, True
     for iterations in range(1, max_iterations + 1):
-        accept = torch.zeros(batch, dtype=torch.bool)
-        new_state, new_costs = state, costs
-        for _ in range(damping.attempts):
-            current = lam if batched else float(lam[0])
-            trial_state, trial_cost = trial(state, system, current)
-            trial_costs = _as_costs(trial_cost)
-            better = torch.isfinite(trial_costs) & (trial_costs < costs) & ~accept
-            if batched:
-                new_state = select(better, trial_state, new_state)
-            elif bool(better[0]):
-                new_state = trial_state
-            new_costs = torch.where(better, trial_costs, new_costs)
-            accept |= better
-            refused += int((~accept).sum())
-            if bool(accept.all()):
-                break
-            lam = torch.where(accept, lam, (lam * damping.grow).clamp(max=damping.ceiling))
+        attempts = _attempt_steps(trial, state, system, costs, lam, damping, select)
+        new_state, new_costs, accept, lam = attempts.state, attempts.costs, attempts.accept, attempts.lam
+        refused += attempts.refused
         if not bool(accept.any()):
             converged = True
             break

@@ -110,6 +110,117 @@ def _axis_order(path: Path, line_no: int, token: str) -> str:
     return order
 
 
+def _units_line(path: Path, no: int, key: str, parts: list[str], raw: str, units: dict) -> None:
+    """Read a ``:units`` line (``length`` and ``angle``; others ignored) into ``units``."""
+    if key == "length":
+        units["length"] = _floats(path, no, parts[1:], 1, ":units length")[0]
+        if units["length"] <= 0:
+            raise MocapFormatError(path, no, f"expected a positive :units length, found {parts[1]}")
+    elif key == "angle":
+        if len(parts) < 2 or parts[1].lower() not in ("deg", "rad"):
+            raise MocapFormatError(path, no, f"expected ':units angle deg|rad', found {raw.strip()!r}")
+        units["angle"] = parts[1].lower()
+
+
+def _root_line(path: Path, no: int, key: str, parts: list[str], root: dict) -> None:
+    """Read a ``:root`` line (``order``, ``axis``, ``orientation``; others ignored) into ``root``."""
+    if key == "order":
+        root["order"] = tuple(p.lower() for p in parts[1:])
+        unknown = [p for p in root["order"] if p not in _ROOT_CHANNELS]
+        if unknown or len(set(root["order"])) != len(root["order"]):
+            raise MocapFormatError(
+                path, no, f"expected root order tokens from TX TY TZ RX RY RZ, found {parts[1:]}"
+            )
+    elif key == "axis":
+        root["axis"] = _axis_order(path, no, parts[1] if len(parts) > 1 else "")
+    elif key == "orientation":
+        root["orientation"] = _floats(path, no, parts[1:], 3, "root orientation")
+
+
+def _bone_field(path: Path, no: int, key: str, parts: list[str], current: dict) -> None:
+    """Read one field line of an open bone block (``name``, ``direction``, ...; others ignored) into ``current``."""
+    if key == "name":
+        current["name"] = parts[1] if len(parts) > 1 else ""
+    elif key == "direction":
+        direction = np.array(_floats(path, no, parts[1:], 3, "bone direction"))
+        norm = float(np.linalg.norm(direction))
+        # A zero direction is legal for a zero-length bone (it then adds nothing).
+        current["direction"] = tuple(direction / norm) if norm > 0 else (0.0, 0.0, 0.0)
+    elif key == "length":
+        current["length"] = _floats(path, no, parts[1:], 1, "bone length")[0]
+    elif key == "axis":
+        current["axis"] = _floats(path, no, parts[1:], 3, "bone axis")
+        current["axis_order"] = _axis_order(path, no, parts[4] if len(parts) > 4 else "")
+    elif key == "dof":
+        dof = tuple(p.lower() for p in parts[1:])
+        bad = [d for d in dof if d not in ("rx", "ry", "rz")]
+        if bad:
+            raise MocapFormatError(
+                path, no, f"unsupported dof {bad} of bone {current.get('name')!r}; expected rx, ry, rz"
+            )
+        current["dof"] = dof
+
+
+def _bonedata_line(
+    path: Path, no: int, key: str, parts: list[str], current: dict | None, bones: dict[str, dict]
+) -> dict | None:
+    """Read a ``:bonedata`` line; returns the open bone block (``None`` after ``end``, which files it in ``bones``)."""
+    if key == "begin":
+        return {"line": no}
+    if key == "end":
+        if current is None or "name" not in current:
+            raise MocapFormatError(path, no, "bone block without a 'name'")
+        missing = [k for k in ("direction", "length", "axis") if k not in current]
+        if missing:
+            raise MocapFormatError(path, no, f"bone {current['name']!r} lacks {', '.join(missing)}")
+        if current["name"] in bones or current["name"] == "root":
+            raise MocapFormatError(path, current["line"], f"bone name {current['name']!r} repeated")
+        bones[current["name"]] = current
+        return None
+    if current is None:
+        raise MocapFormatError(path, no, f"expected 'begin' of a bone block, found {parts[0]!r}")
+    _bone_field(path, no, key, parts, current)
+    return current
+
+
+def _hierarchy_line(
+    path: Path, no: int, key: str, parts: list[str], children: dict[str, list[str]], child_line: dict[str, int]
+) -> None:
+    """Read a ``:hierarchy`` line (``parent child...``) into ``children``; a child's line goes to ``child_line``."""
+    if key in ("begin", "end"):
+        return
+    for child in parts[1:]:
+        if child in child_line:
+            raise MocapFormatError(
+                path, no, f"bone {child!r} has a second parent (first on line {child_line[child]})"
+            )
+        child_line[child] = no
+    children.setdefault(parts[0], []).extend(parts[1:])
+
+
+def _ordered_bones(
+    path: Path, bones: dict[str, dict], children: dict[str, list[str]], child_line: dict[str, int]
+) -> tuple[AsfBone, ...]:
+    """The bones in depth-first order from the root (parents first), checked against the hierarchy."""
+    for parent, kids in children.items():
+        for name in [parent] + kids:
+            if name != "root" and name not in bones:
+                raise MocapFormatError(
+                    path, child_line.get(name), f"hierarchy names bone {name!r}, absent from :bonedata"
+                )
+    ordered: list[AsfBone] = []
+    stack = [(kid, -1) for kid in reversed(children.get("root", []))]
+    while stack:
+        name, parent = stack.pop()
+        b = bones[name]
+        ordered.append(AsfBone(name, parent, b["direction"], b["length"], b["axis"], b["axis_order"], b.get("dof", ())))
+        stack.extend((kid, len(ordered) - 1) for kid in reversed(children.get(name, [])))
+    unreachable = sorted(set(bones) - {b.name for b in ordered})
+    if unreachable:
+        raise MocapFormatError(path, None, f"bones not reachable from root in ':hierarchy': {', '.join(unreachable)}")
+    return tuple(ordered)
+
+
 def read_asf(path: str | Path) -> AsfSkeleton:
     """Parse an ASF skeleton file (plain or gzip).
 
@@ -127,8 +238,7 @@ def read_asf(path: str | Path) -> AsfSkeleton:
     lines = read_text_lines(path)
     section = None
     units = {"length": 1.0, "angle": "deg"}
-    root_order: tuple[str, ...] | None = None
-    root_axis, root_orient = "xyz", (0.0, 0.0, 0.0)
+    root: dict = {"order": None, "axis": "xyz", "orientation": (0.0, 0.0, 0.0)}
     bones: dict[str, dict] = {}
     current: dict | None = None
     children: dict[str, list[str]] = {}
@@ -147,89 +257,16 @@ def read_asf(path: str | Path) -> AsfSkeleton:
                 raise MocapFormatError(path, no, f"unknown ASF section {parts[0]!r}")
             continue
         if section == ":units":
-            if key == "length":
-                units["length"] = _floats(path, no, parts[1:], 1, ":units length")[0]
-                if units["length"] <= 0:
-                    raise MocapFormatError(path, no, f"expected a positive :units length, found {parts[1]}")
-            elif key == "angle":
-                if len(parts) < 2 or parts[1].lower() not in ("deg", "rad"):
-                    raise MocapFormatError(path, no, f"expected ':units angle deg|rad', found {raw.strip()!r}")
-                units["angle"] = parts[1].lower()
+            _units_line(path, no, key, parts, raw, units)
         elif section == ":root":
-            if key == "order":
-                root_order = tuple(p.lower() for p in parts[1:])
-                unknown = [p for p in root_order if p not in _ROOT_CHANNELS]
-                if unknown or len(set(root_order)) != len(root_order):
-                    raise MocapFormatError(
-                        path, no, f"expected root order tokens from TX TY TZ RX RY RZ, found {parts[1:]}"
-                    )
-            elif key == "axis":
-                root_axis = _axis_order(path, no, parts[1] if len(parts) > 1 else "")
-            elif key == "orientation":
-                root_orient = _floats(path, no, parts[1:], 3, "root orientation")
+            _root_line(path, no, key, parts, root)
         elif section == ":bonedata":
-            if key == "begin":
-                current = {"line": no}
-            elif key == "end":
-                if current is None or "name" not in current:
-                    raise MocapFormatError(path, no, "bone block without a 'name'")
-                missing = [k for k in ("direction", "length", "axis") if k not in current]
-                if missing:
-                    raise MocapFormatError(path, no, f"bone {current['name']!r} lacks {', '.join(missing)}")
-                if current["name"] in bones or current["name"] == "root":
-                    raise MocapFormatError(path, current["line"], f"bone name {current['name']!r} repeated")
-                bones[current["name"]] = current
-                current = None
-            elif current is None:
-                raise MocapFormatError(path, no, f"expected 'begin' of a bone block, found {parts[0]!r}")
-            elif key == "name":
-                current["name"] = parts[1] if len(parts) > 1 else ""
-            elif key == "direction":
-                direction = np.array(_floats(path, no, parts[1:], 3, "bone direction"))
-                norm = float(np.linalg.norm(direction))
-                # A zero direction is legal for a zero-length bone (it then adds nothing).
-                current["direction"] = tuple(direction / norm) if norm > 0 else (0.0, 0.0, 0.0)
-            elif key == "length":
-                current["length"] = _floats(path, no, parts[1:], 1, "bone length")[0]
-            elif key == "axis":
-                current["axis"] = _floats(path, no, parts[1:], 3, "bone axis")
-                current["axis_order"] = _axis_order(path, no, parts[4] if len(parts) > 4 else "")
-            elif key == "dof":
-                dof = tuple(p.lower() for p in parts[1:])
-                bad = [d for d in dof if d not in ("rx", "ry", "rz")]
-                if bad:
-                    raise MocapFormatError(
-                        path, no, f"unsupported dof {bad} of bone {current.get('name')!r}; expected rx, ry, rz"
-                    )
-                current["dof"] = dof
+            current = _bonedata_line(path, no, key, parts, current, bones)
         elif section == ":hierarchy":
-            if key in ("begin", "end"):
-                continue
-            for child in parts[1:]:
-                if child in child_line:
-                    raise MocapFormatError(
-                        path, no, f"bone {child!r} has a second parent (first on line {child_line[child]})"
-                    )
-                child_line[child] = no
-            children.setdefault(parts[0], []).extend(parts[1:])
-    if root_order is None:
+            _hierarchy_line(path, no, key, parts, children, child_line)
+    if root["order"] is None:
         raise MocapFormatError(path, None, "no ':root' section with an 'order' line")
     if not bones:
         raise MocapFormatError(path, None, "no bones in ':bonedata'")
-    for parent, kids in children.items():
-        for name in [parent] + kids:
-            if name != "root" and name not in bones:
-                raise MocapFormatError(
-                    path, child_line.get(name), f"hierarchy names bone {name!r}, absent from :bonedata"
-                )
-    ordered: list[AsfBone] = []
-    stack = [(kid, -1) for kid in reversed(children.get("root", []))]
-    while stack:
-        name, parent = stack.pop()
-        b = bones[name]
-        ordered.append(AsfBone(name, parent, b["direction"], b["length"], b["axis"], b["axis_order"], b.get("dof", ())))
-        stack.extend((kid, len(ordered) - 1) for kid in reversed(children.get(name, [])))
-    unreachable = sorted(set(bones) - {b.name for b in ordered})
-    if unreachable:
-        raise MocapFormatError(path, None, f"bones not reachable from root in ':hierarchy': {', '.join(unreachable)}")
-    return AsfSkeleton(path, units["length"], units["angle"], root_order, root_axis, root_orient, tuple(ordered))
+    ordered = _ordered_bones(path, bones, children, child_line)
+    return AsfSkeleton(path, units["length"], units["angle"], root["order"], root["axis"], root["orientation"], ordered)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from humancal.mocap.bvh_hierarchy import BvhJoint, parse_hierarchy
 from humancal.mocap.clip import MocapClip, MocapFormatError
 from humancal.mocap.kinematics import (
     R_ZUP_FROM_YUP,
@@ -38,36 +39,6 @@ logger = logging.getLogger(__name__)
 CMU_DAZ_LEADING_FRAMES = 8
 """Frames to drop at the start of a CMU Daz BVH file: the added T-pose (frame 1) and the 7 frames in which the
 retargeted limbs blend from it into the captured motion (``docs/mocap.md`` has the measurements)."""
-
-_CHANNELS = {
-    "xposition": "Xposition",
-    "yposition": "Yposition",
-    "zposition": "Zposition",
-    "xrotation": "Xrotation",
-    "yrotation": "Yrotation",
-    "zrotation": "Zrotation",
-}
-
-
-@dataclass(frozen=True)
-class BvhJoint:
-    """One node of a BVH hierarchy.
-
-    Attributes:
-        name: joint name; End Sites are named ``<parent>_end``.
-        parent: index of the parent node, -1 for a root.
-        offset: (3,) OFFSET from the parent, file units and axes.
-        channels: channel names as declared (canonical case), e.g. ``("Zrotation", "Xrotation", "Yrotation")``.
-        first_column: column of the first channel in a MOTION line.
-        is_end_site: whether the node is an End Site (no channels).
-    """
-
-    name: str
-    parent: int
-    offset: tuple[float, float, float]
-    channels: tuple[str, ...]
-    first_column: int
-    is_end_site: bool
 
 
 @dataclass(frozen=True)
@@ -96,105 +67,6 @@ class BvhMotion:
         fps = 1.0 / self.frame_time_s
         nearest = round(fps)
         return float(nearest) if nearest > 0 and abs(fps - nearest) <= 1e-4 * nearest else fps
-
-
-def _tokens(lines: list[str], stop: int) -> list[tuple[str, int]]:
-    """Whitespace tokens of ``lines[:stop]`` with 1-based line numbers; braces are tokens of their own."""
-    out: list[tuple[str, int]] = []
-    for i in range(stop):
-        for tok in lines[i].replace("{", " { ").replace("}", " } ").split():
-            out.append((tok, i + 1))
-    return out
-
-
-def _parse_hierarchy(path: Path, lines: list[str], motion_line: int) -> list[BvhJoint]:
-    toks = _tokens(lines, motion_line)
-    pos = 0
-    last_line = toks[-1][1] if toks else 1
-
-    def take(expected: str) -> tuple[str, int]:
-        nonlocal pos
-        if pos >= len(toks):
-            raise MocapFormatError(path, last_line, f"HIERARCHY ends early; expected {expected}")
-        tok = toks[pos]
-        pos += 1
-        return tok
-
-    def expect(word: str) -> int:
-        tok, line = take(f"'{word}'")
-        if tok != word:
-            raise MocapFormatError(path, line, f"expected '{word}', found {tok!r}")
-        return line
-
-    def number(what: str) -> float:
-        tok, line = take(what)
-        try:
-            value = float(tok)
-        except ValueError:
-            raise MocapFormatError(path, line, f"expected {what} (a number), found {tok!r}") from None
-        if not np.isfinite(value):
-            raise MocapFormatError(path, line, f"expected {what} (a finite number), found {tok!r}")
-        return value
-
-    joints: list[BvhJoint] = []
-    column = 0
-
-    def parse_node(kind: str, parent: int) -> None:
-        nonlocal column
-        if kind == "End":
-            line = expect("Site")
-            name = f"{joints[parent].name}_end"
-        else:
-            name_tok, line = take(f"a {kind} name")
-            if name_tok == "{":
-                raise MocapFormatError(path, line, f"{kind} without a name")
-            name = name_tok
-        expect("{")
-        expect("OFFSET")
-        offset = (number("OFFSET x"), number("OFFSET y"), number("OFFSET z"))
-        channels: tuple[str, ...] = ()
-        if kind != "End":
-            expect("CHANNELS")
-            count_tok, count_line = take("the channel count")
-            if not count_tok.isdigit():
-                raise MocapFormatError(path, count_line, f"expected the channel count of {name!r}, found {count_tok!r}")
-            names = []
-            for _ in range(int(count_tok)):
-                tok, ch_line = take(f"a channel name of {name!r}")
-                canonical = _CHANNELS.get(tok.lower())
-                if canonical is None:
-                    raise MocapFormatError(
-                        path, ch_line, f"unknown channel {tok!r} of joint {name!r}; expected one of "
-                        f"{', '.join(_CHANNELS.values())}"
-                    )
-                names.append(canonical)
-            channels = tuple(names)
-        index = len(joints)
-        joints.append(BvhJoint(name, parent, offset, channels, column, kind == "End"))
-        column += len(channels)
-        while True:
-            tok, tok_line = take(f"JOINT, End Site or '}}' closing {name!r}")
-            if tok == "}":
-                return
-            if kind == "End" or tok not in ("JOINT", "End"):
-                raise MocapFormatError(path, tok_line, f"expected JOINT, End Site or '}}' in {name!r}, found {tok!r}")
-            parse_node(tok, index)
-
-    first, line = take("'HIERARCHY'")
-    if first != "HIERARCHY":
-        raise MocapFormatError(path, line, f"expected 'HIERARCHY' at the start of a BVH file, found {first!r}")
-    while pos < len(toks):
-        tok, line = take("ROOT")
-        if tok != "ROOT":
-            raise MocapFormatError(path, line, f"expected ROOT or MOTION, found {tok!r}")
-        parse_node("ROOT", -1)
-    if not joints:
-        raise MocapFormatError(path, last_line, "HIERARCHY declares no ROOT")
-    names = [j.name for j in joints]
-    duplicates = sorted({n for n in names if names.count(n) > 1})
-    if duplicates:
-        raise MocapFormatError(path, None, f"joint names must be unique; repeated: {', '.join(duplicates)}")
-    return joints
 
 
 def _header_value(path: Path, lines: list[str], index: int, label: str) -> str:
@@ -270,7 +142,7 @@ def parse_bvh(path: str | Path) -> BvhMotion:
     motion = next((i for i, line in enumerate(lines) if line.strip() == "MOTION"), None)
     if motion is None:
         raise MocapFormatError(path, None, "no MOTION section (expected a line 'MOTION' after the HIERARCHY)")
-    joints = _parse_hierarchy(path, lines, motion)
+    joints = parse_hierarchy(path, lines, motion)
     n_channels = sum(len(j.channels) for j in joints)
     frames_text = _header_value(path, lines, motion + 1, "Frames:")
     if not frames_text.isdigit():

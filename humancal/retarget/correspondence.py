@@ -164,6 +164,57 @@ class ResolvedLinks:
         return np.array([kind != "none" for kind in self.offset_kind], dtype=bool)
 
 
+def _resolve_anchor(
+    where: str, link: JointLink, c: int, bone_index: dict[str, int], keypoint_index: dict[str, int],
+    posed_bones: Sequence[str], posed_parents: Sequence[int],
+) -> tuple[int, int]:
+    """``(anchor_bone, anchor_keypoint)`` of one row with carrier index ``c`` (-1 for the kind it is not)."""
+    if link.kind == "bone_head":
+        if link.anchor not in bone_index:
+            raise ValueError(
+                f"{where}: anchor {link.anchor!r} is not a posed bone; posed bones: {list(posed_bones)}"
+            )
+        b = bone_index[link.anchor]
+        if c not in (b, posed_parents[b]):
+            raise ValueError(
+                f"{where}: the carrier of bone head {link.anchor!r} must be the bone itself or its parent "
+                f"{posed_bones[posed_parents[b]] if posed_parents[b] >= 0 else '(none)'!r}, got {link.carrier!r}"
+            )
+        return b, -1
+    if link.kind == "keypoint":
+        if link.anchor not in keypoint_index:
+            raise ValueError(
+                f"{where}: anchor {link.anchor!r} is not a canonical keypoint: {list(CANONICAL_JOINTS)}"
+            )
+        return -1, keypoint_index[link.anchor]
+    raise ValueError(f"{where}: kind must be 'bone_head' or 'keypoint', got {link.kind!r}")
+
+
+def _check_weight_and_offset(where: str, link: JointLink, c: int, bone_index: dict[str, int]) -> None:
+    """Raise on a non-positive weight, an unknown offset kind or an ``"along"`` offset carried by its own bone."""
+    if not (np.isfinite(link.weight) and link.weight > 0):
+        raise ValueError(f"{where}: weight must be positive and finite, got {link.weight!r}")
+    if link.offset not in ("none", "along", "free"):
+        raise ValueError(f"{where}: offset must be 'none', 'along' or 'free', got {link.offset!r}")
+    if link.offset == "along" and link.kind == "bone_head" and c == bone_index[link.anchor]:
+        raise ValueError(f"{where}: an 'along' offset needs a carrier other than the anchor's own bone "
+                         "(the segment runs from the carrier's head to the anchor)")
+
+
+def _mirror_row(where: str, i: int, link: JointLink, links: tuple[JointLink, ...], row_of: dict[str, int]) -> int:
+    """The row of row ``i``'s mirror twin (``i`` on the midline), checked to point back with the same offset."""
+    if link.mirror is None:
+        return i
+    twin = row_of.get(link.mirror)
+    if twin is None or links[twin].mirror != link.mocap_joint or twin == i:
+        raise ValueError(
+            f"{where}: mirror {link.mirror!r} must be another row whose mirror is {link.mocap_joint!r}"
+        )
+    if links[twin].offset != link.offset:
+        raise ValueError(f"{where}: offset kind differs from its mirror {link.mirror!r}")
+    return twin
+
+
 def resolve_links(
     links: Sequence[JointLink], posed_bones: Sequence[str], posed_parents: Sequence[int]
 ) -> ResolvedLinks:
@@ -197,47 +248,12 @@ def resolve_links(
         if link.carrier not in bone_index:
             raise ValueError(f"{where}: carrier {link.carrier!r} is not a posed bone; posed bones: {list(posed_bones)}")
         c = bone_index[link.carrier]
-        if link.kind == "bone_head":
-            if link.anchor not in bone_index:
-                raise ValueError(
-                    f"{where}: anchor {link.anchor!r} is not a posed bone; posed bones: {list(posed_bones)}"
-                )
-            b = bone_index[link.anchor]
-            if c not in (b, posed_parents[b]):
-                raise ValueError(
-                    f"{where}: the carrier of bone head {link.anchor!r} must be the bone itself or its parent "
-                    f"{posed_bones[posed_parents[b]] if posed_parents[b] >= 0 else '(none)'!r}, got {link.carrier!r}"
-                )
-            anchor_bone.append(b)
-            anchor_keypoint.append(-1)
-        elif link.kind == "keypoint":
-            if link.anchor not in keypoint_index:
-                raise ValueError(
-                    f"{where}: anchor {link.anchor!r} is not a canonical keypoint: {list(CANONICAL_JOINTS)}"
-                )
-            anchor_bone.append(-1)
-            anchor_keypoint.append(keypoint_index[link.anchor])
-        else:
-            raise ValueError(f"{where}: kind must be 'bone_head' or 'keypoint', got {link.kind!r}")
-        if not (np.isfinite(link.weight) and link.weight > 0):
-            raise ValueError(f"{where}: weight must be positive and finite, got {link.weight!r}")
-        if link.offset not in ("none", "along", "free"):
-            raise ValueError(f"{where}: offset must be 'none', 'along' or 'free', got {link.offset!r}")
-        if link.offset == "along" and link.kind == "bone_head" and c == bone_index[link.anchor]:
-            raise ValueError(f"{where}: an 'along' offset needs a carrier other than the anchor's own bone "
-                             "(the segment runs from the carrier's head to the anchor)")
+        b, k = _resolve_anchor(where, link, c, bone_index, keypoint_index, posed_bones, posed_parents)
+        anchor_bone.append(b)
+        anchor_keypoint.append(k)
+        _check_weight_and_offset(where, link, c, bone_index)
         carrier.append(c)
-        if link.mirror is None:
-            mirror.append(i)
-        else:
-            twin = row_of.get(link.mirror)
-            if twin is None or links[twin].mirror != link.mocap_joint or twin == i:
-                raise ValueError(
-                    f"{where}: mirror {link.mirror!r} must be another row whose mirror is {link.mocap_joint!r}"
-                )
-            if links[twin].offset != link.offset:
-                raise ValueError(f"{where}: offset kind differs from its mirror {link.mirror!r}")
-            mirror.append(twin)
+        mirror.append(_mirror_row(where, i, link, links, row_of))
     return ResolvedLinks(
         links=links,
         mocap_joints=names,

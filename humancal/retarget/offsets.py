@@ -17,6 +17,7 @@ need not be consecutive (no smoothness term).
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import roma
 import torch
@@ -42,6 +43,72 @@ def _total_cost(points, rest, basis, phi, rotmats, translation, targets_m, weigh
     structure = PointStructure(coefficients, points.subtree)
     cost = frame_costs(points, coefficients, structure, rotmats, translation, targets_m, weights, None)
     return cost.sum() + targets_m.shape[0] * (prior_weight * phi**2).sum(), coefficients, structure
+
+
+@dataclass(frozen=True)
+class _JointProblem:
+    """The fixed data of the joint fit (float64), with its linearisation and trial step for the LM driver.
+
+    Attributes:
+        points: the mapped-point model.
+        rest: the person's rest skeleton.
+        basis: (3 M, k) ``points.offset_basis(rest)``.
+        targets_m: (F, M, 3) mocap positions, metres.
+        weights: the pose priors, smoothness off.
+        offset_prior_weights: (k,) prior weight per offset coordinate.
+    """
+
+    points: PointModel
+    rest: RestSkeleton
+    basis: Tensor
+    targets_m: Tensor
+    weights: PoseWeights
+    offset_prior_weights: Tensor
+
+    def offset_jacobian(self, rotations: Tensor) -> Tensor:
+        """(F, 3 M, k) ``d p_m / d phi = G_carrier(m) @ basis_m``, scaled like the residual rows."""
+        num_frames, num_points, k = rotations.shape[0], self.points.num_points, self.basis.shape[1]
+        basis_per_point = self.basis.reshape(num_points, 3, k)
+        root_weight = self.points.weight.to(torch.float64).sqrt()
+        jac_phi = torch.einsum("fmij,mjk->fmik", rotations[:, self.points.carrier], basis_per_point)
+        return (jac_phi * root_weight[None, :, None, None]).reshape(num_frames, 3 * num_points, k)
+
+    def linearize(self, state):
+        """``((ArrowSystem, rotations (F, B, 3, 3)), objective)`` at ``state = (rotmats, translation, phi)``."""
+        rotmats, translation, phi = state
+        total, coefficients, structure = _total_cost(
+            self.points, self.rest, self.basis, phi, rotmats, translation, self.targets_m, self.weights,
+            self.offset_prior_weights,
+        )
+        _, rotations, g_x, h_xx, jac_x, residual = frame_costs(
+            self.points, coefficients, structure, rotmats, translation, self.targets_m, self.weights, None,
+            derivatives=True, jacobian=True,
+        )
+        jac_phi = self.offset_jacobian(rotations)
+        frame_prior = rotmats.shape[0] * self.offset_prior_weights.to(torch.float64)
+        system = ArrowSystem(
+            global_hessian=torch.einsum("fri,frj->ij", jac_phi, jac_phi) + torch.diag(frame_prior),
+            block_hessian=h_xx,
+            cross=jac_x.transpose(1, 2) @ jac_phi,  # (F, N, k)
+            global_gradient=torch.einsum("fri,fr->i", jac_phi, residual) + frame_prior * phi,
+            block_gradient=g_x,
+        )
+        return (system, rotations), total
+
+    def trial(self, state, linearization, damping):
+        """The state after the damped step and its objective (``inf`` when a frame's system is singular)."""
+        system, rotations = linearization
+        rotmats, translation, phi = state
+        step = solve_damped(system, damping)
+        if not bool(step.solved.all()):
+            return state, float("inf")
+        world_step = step.block_step[:, 3:].reshape(rotmats.shape[0], rotmats.shape[1], 3)
+        local_step = (rotations.transpose(-1, -2) @ world_step[..., None])[..., 0]
+        new_state = (rotmats @ roma.rotvec_to_rotmat(local_step), translation + step.block_step[:, :3],
+                     phi + step.global_step)
+        total = _total_cost(self.points, self.rest, self.basis, new_state[2], *new_state[:2], self.targets_m,
+                            self.weights, self.offset_prior_weights)[0]
+        return new_state, total
 
 
 def fit_poses_and_offsets(
@@ -83,51 +150,9 @@ def fit_poses_and_offsets(
     with torch.no_grad():
         basis = points.offset_basis(rest, f64)
     rotmats, translation, targets_m = rotmats.to(f64), translation.to(f64), targets_m.to(f64)
-    phi = coordinates.to(f64)
-    num_frames, num_bones = rotmats.shape[:2]
-    num_points, k = points.num_points, basis.shape[1]
-    carrier = points.carrier
-    basis_per_point = basis.reshape(num_points, 3, k)
-    root_weight = points.weight.to(f64).sqrt()
-    frame_prior = num_frames * offset_prior_weights.to(f64)
-
-    def linearize(state):
-        rotmats, translation, phi = state
-        total, coefficients, structure = _total_cost(
-            points, rest, basis, phi, rotmats, translation, targets_m, weights, offset_prior_weights
-        )
-        _, rotations, g_x, h_xx, jac_x, residual = frame_costs(
-            points, coefficients, structure, rotmats, translation, targets_m, weights, None,
-            derivatives=True, jacobian=True,
-        )
-        # d p_m / d phi = G_carrier(m) @ basis_m, scaled like the residual rows.
-        jac_phi = torch.einsum("fmij,mjk->fmik", rotations[:, carrier], basis_per_point)
-        jac_phi = (jac_phi * root_weight[None, :, None, None]).reshape(num_frames, 3 * num_points, k)
-        system = ArrowSystem(
-            global_hessian=torch.einsum("fri,frj->ij", jac_phi, jac_phi) + torch.diag(frame_prior),
-            block_hessian=h_xx,
-            cross=jac_x.transpose(1, 2) @ jac_phi,  # (F, N, k)
-            global_gradient=torch.einsum("fri,fr->i", jac_phi, residual) + frame_prior * phi,
-            block_gradient=g_x,
-        )
-        return (system, rotations), total
-
-    def trial(state, linearization, damping):
-        system, rotations = linearization
-        rotmats, translation, phi = state
-        step = solve_damped(system, damping)
-        if not bool(step.solved.all()):
-            return state, float("inf")
-        world_step = step.block_step[:, 3:].reshape(num_frames, num_bones, 3)
-        local_step = (rotations.transpose(-1, -2) @ world_step[..., None])[..., 0]
-        new_state = (rotmats @ roma.rotvec_to_rotmat(local_step), translation + step.block_step[:, :3],
-                     phi + step.global_step)
-        total = _total_cost(points, rest, basis, new_state[2], *new_state[:2], targets_m, weights,
-                            offset_prior_weights)[0]
-        return new_state, total
-
-    outcome = levenberg_marquardt(linearize, trial, (rotmats, translation, phi), max_iterations=iterations,
-                                  damping=_DAMPING, stop=Stop(relative=1e-10, absolute=1e-14),
-                                  relinearize_last=False)
+    problem = _JointProblem(points, rest, basis, targets_m, weights, offset_prior_weights)
+    outcome = levenberg_marquardt(problem.linearize, problem.trial, (rotmats, translation, coordinates.to(f64)),
+                                  max_iterations=iterations, damping=_DAMPING,
+                                  stop=Stop(relative=1e-10, absolute=1e-14), relinearize_last=False)
     rotmats, translation, phi = outcome.state
     return rotmats, translation, phi, float(outcome.cost)
