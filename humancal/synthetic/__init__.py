@@ -11,9 +11,11 @@ Example:
 """
 
 from humancal.synthetic.activities import ACTIVITIES, GESTURES
-from humancal.synthetic.config import BEHAVIOURS, RIG_KINDS, DetectorNoise, SceneConfig
+from humancal.synthetic.config import BEHAVIOURS, RIG_KINDS, SceneConfig
+from humancal.synthetic.detector_errors import JOINT_NOISE_WEIGHTS
+from humancal.synthetic.detector_noise import DetectorNoise
 from humancal.synthetic.motions import Motions, generate_motions
-from humancal.synthetic.noise import JOINT_NOISE_WEIGHTS, DetectorOutput, simulate_detections
+from humancal.synthetic.noise import DetectorOutput, simulate_detections
 from humancal.synthetic.people import People, sample_people
 from humancal.synthetic.presets import PRESETS, preset, preset_names
 from humancal.synthetic.rigs import look_at, make_rig

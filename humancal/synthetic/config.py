@@ -1,16 +1,18 @@
-"""Configuration of a synthetic scene: the scene itself (:class:`SceneConfig`) and the detector model
-(:class:`DetectorNoise`).
+"""Configuration of a synthetic scene (:class:`SceneConfig`); its detector model, :class:`DetectorNoise`, lives in
+:mod:`humancal.synthetic.detector_noise` (importable from here too).
 
-Both are frozen dataclasses validated on construction: a bad value raises a one-line ``ValueError`` naming the
-field, the value received and the allowed range. Every length is in metres, every image quantity in pixels.
+A frozen dataclass validated on construction: a bad value raises a one-line ``ValueError`` naming the field, the
+value received and the allowed range. Every length is in metres, every image quantity in pixels.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
+from humancal.config import Config, Range, in_range, ordered_pair
+from humancal.synthetic.detector_noise import DetectorNoise
 from humancal.synthetic.lenses import distorted_radius, fits_monotonic, fold_radius
 
 __all__ = [
@@ -70,138 +72,11 @@ OUT_OF_VIEW_DURATION_S = (1.0, 4.0)
 """How long a person stays out of every view in one spell (``out_of_view_spells``), seconds (uniform)."""
 _AREA_PER_PERSON_M2 = 2.0
 """Floor area each person needs to walk about without constant collisions, square metres."""
-
-
-def _check_range(owner: str, name: str, value: float, low: float, high: float, *, integer: bool = False) -> None:
-    kind = "an integer" if integer else "a number"
-    if integer and (isinstance(value, bool) or not isinstance(value, int)):
-        raise ValueError(f"{owner}.{name}={value!r} must be {kind} in [{low}, {high}]")
-    if not integer and (isinstance(value, bool) or not isinstance(value, (int, float))):
-        raise ValueError(f"{owner}.{name}={value!r} must be {kind} in [{low}, {high}]")
-    if not (math.isfinite(value) and low <= value <= high):
-        raise ValueError(f"{owner}.{name}={value!r} is out of range; allowed: [{low}, {high}]")
-
-
-def _check_interval(owner: str, name: str, value: object, low: float, high: float) -> tuple[float, float]:
-    if not (isinstance(value, (tuple, list)) and len(value) == 2):
-        raise ValueError(f"{owner}.{name}={value!r} must be a (min, max) pair within [{low}, {high}]")
-    lo, hi = value
-    for v in (lo, hi):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise ValueError(f"{owner}.{name}={value!r} must hold two finite numbers within [{low}, {high}]")
-    if not (low <= lo <= hi <= high):
-        raise ValueError(f"{owner}.{name}={value!r} is out of range; allowed: min <= max within [{low}, {high}]")
-    return float(lo), float(hi)
+_OWNER = "SceneConfig"
 
 
 @dataclass(frozen=True)
-class DetectorNoise:
-    """How the simulated 2D pose detector errs (``docs/synthetic.md``, "Noise model").
-
-    Image-space spreads scale with the person's apparent height ``scale_px = fx * height_m / depth_m`` (pelvis
-    depth), so a far person gets proportionally smaller pixel errors, like a real detector working on a
-    resized crop. Per-joint spreads follow the COCO keypoint sigmas (hips noisier than eyes), normalised to a
-    mean weight of 1 over the 23 joints.
-
-    Attributes:
-        jitter_std_frac: std of the Gaussian jitter per image axis, as a fraction of ``scale_px`` (mean over
-            joints). 0.008 is about 3 px on a 400 px tall person.
-        occluded_jitter_factor: multiplies the jitter of a fully occluded joint (>= 1; partial occlusion
-            interpolates).
-        outlier_rate: probability that a detected joint is a gross outlier (in [0, 1]).
-        outlier_std_frac: std of an outlier's extra offset per axis, fraction of ``scale_px``.
-        score_mean: mean confidence of a clearly visible joint, in [0, 1].
-        score_std: std of the per-joint confidence noise.
-        occlusion_score_drop: confidence lost by a fully occluded joint.
-        border_margin_frac: width of the band inside the image border where confidence falls, fraction of
-            ``scale_px``.
-        border_score_drop: confidence lost by a joint right at the image border.
-        joint_miss_rate: probability that a visible, unoccluded joint is missing from its detection.
-        occluded_joint_miss_rate: probability that a fully occluded joint is missing (partial occlusion
-            interpolates between the two rates).
-        person_miss_rate: probability that a person in view gives no detection at all in a view and frame.
-        min_visible_joints: a person gives a detection only with at least this many joints inside the image
-            and not fully occluded (1..23).
-        false_positives_per_image: mean number of false-positive detections per view and frame (Poisson).
-        false_positive_fragment_prob: probability that a false positive is a fragment (one body part) rather
-            than a whole skeleton.
-        false_positive_score_mean: mean joint confidence of a false positive, in [0, 1].
-        flip_rate: probability that a detection has its left and right labels swapped.
-        keypoint_bias_m: std per axis of each keypoint's systematic offset from the body model's keypoint, metres
-            (0: none). A real detector is trained on its own definition of the joints (where a hip or an ankle
-            is); the offsets are drawn once per scene, in the axes of the keypoint's dominant bone, the same for
-            every person and frame, and mirrored between left and right
-            (:func:`humancal.synthetic.noise.draw_keypoint_bias`). The ground truth keeps the model's keypoints.
-    """
-
-    jitter_std_frac: float = 0.008
-    occluded_jitter_factor: float = 3.0
-    outlier_rate: float = 0.005
-    outlier_std_frac: float = 0.08
-    score_mean: float = 0.85
-    score_std: float = 0.06
-    occlusion_score_drop: float = 0.5
-    border_margin_frac: float = 0.05
-    border_score_drop: float = 0.3
-    joint_miss_rate: float = 0.02
-    occluded_joint_miss_rate: float = 0.5
-    person_miss_rate: float = 0.03
-    min_visible_joints: int = 4
-    false_positives_per_image: float = 0.05
-    false_positive_fragment_prob: float = 0.5
-    false_positive_score_mean: float = 0.4
-    flip_rate: float = 0.02
-    keypoint_bias_m: float = 0.0
-
-    def __post_init__(self) -> None:
-        owner = "DetectorNoise"
-        for name in ("jitter_std_frac", "outlier_std_frac"):
-            _check_range(owner, name, getattr(self, name), 0.0, 1.0)
-        _check_range(owner, "occluded_jitter_factor", self.occluded_jitter_factor, 1.0, 100.0)
-        for name in (
-            "outlier_rate",
-            "score_mean",
-            "score_std",
-            "occlusion_score_drop",
-            "border_margin_frac",
-            "border_score_drop",
-            "joint_miss_rate",
-            "occluded_joint_miss_rate",
-            "person_miss_rate",
-            "false_positive_fragment_prob",
-            "false_positive_score_mean",
-            "flip_rate",
-        ):
-            _check_range(owner, name, getattr(self, name), 0.0, 1.0)
-        _check_range(owner, "min_visible_joints", self.min_visible_joints, 1, 23, integer=True)
-        _check_range(owner, "false_positives_per_image", self.false_positives_per_image, 0.0, 20.0)
-        _check_range(owner, "keypoint_bias_m", self.keypoint_bias_m, 0.0, 0.2)
-
-    @classmethod
-    def none(cls) -> DetectorNoise:
-        """A perfect detector: exact projections, confidence 1, nothing missed, no false positives or flips.
-
-        Joints outside the image are still dropped, and a person needs one joint in the image to be detected.
-        """
-        return cls(
-            jitter_std_frac=0.0,
-            occluded_jitter_factor=1.0,
-            outlier_rate=0.0,
-            score_mean=1.0,
-            score_std=0.0,
-            occlusion_score_drop=0.0,
-            border_score_drop=0.0,
-            joint_miss_rate=0.0,
-            occluded_joint_miss_rate=0.0,
-            person_miss_rate=0.0,
-            min_visible_joints=1,
-            false_positives_per_image=0.0,
-            flip_rate=0.0,
-        )
-
-
-@dataclass(frozen=True)
-class SceneConfig:
+class SceneConfig(Config):
     """Everything that defines a synthetic scene; the same config (seed included) gives the same scene.
 
     Attributes:
@@ -281,43 +156,54 @@ class SceneConfig:
             (``docs/synthetic.md``, "Unsynchronised videos").
     """
 
-    num_people: int = 4
-    num_views: int = 5
-    num_frames: int = 300
-    fps: float = 30.0
-    seed: int = 0
+    num_people: int = field(default=4, metadata=in_range(1, MAX_PEOPLE, integer=True))
+    num_views: int = field(default=5, metadata=in_range(MIN_VIEWS, MAX_VIEWS, integer=True))
+    num_frames: int = field(default=300, metadata=in_range(1, 1_000_000, integer=True))
+    fps: float = field(default=30.0, metadata=in_range(1, 1000))
+    seed: int = field(default=0, metadata=in_range(0, 2**63 - 1, integer=True))
     rig: RigKind = "ring"
     h36m_subject: str = "S1"
     focal_range_px: tuple[float, float] = (900.0, 1600.0)
     image_size_px: tuple[int, int] = (1920, 1080)
     area_size_m: tuple[float, float] = (5.0, 4.0)
     camera_height_range_m: tuple[float, float] = (1.5, 4.0)
-    area_fill: float = 0.9
-    arc_span_deg: float = 150.0
+    area_fill: float = field(default=0.9, metadata=in_range(0.3, 1.2))
+    arc_span_deg: float = field(default=150.0, metadata=in_range(30, 330))
     height_range_m: tuple[float, float] = (1.5, 1.95)
     noise: DetectorNoise = field(default_factory=DetectorNoise)
     behaviour: Behaviour = "mixed"
     distortion_k1_range: tuple[float, float] = (0.0, 0.0)
     camera_pitch_range_deg: tuple[float, float] | None = None
-    out_of_view_spells: float = 0.0
-    principal_point_offset_px: float = 0.0
+    out_of_view_spells: float = field(default=0.0, metadata=in_range(0, 5))
+    principal_point_offset_px: float = field(default=0.0, metadata=in_range(0, 200))
     dome_elevation_range_deg: tuple[float, float] = (-5.0, 55.0)
-    far_views: int = 0
+    far_views: int = field(default=0, metadata=in_range(0, 4, integer=True))
     far_distance_factor: tuple[float, float] = (2.0, 4.0)
     distortion_k2_range: tuple[float, float] = (0.0, 0.0)
     focal_aspect_range: tuple[float, float] = (1.0, 1.0)
-    principal_point_offset_max_frac: float = 0.0
+    principal_point_offset_max_frac: float = field(default=0.0, metadata=in_range(0, PRINCIPAL_POINT_FRAC_LIMIT))
     horizontal_fov_range_deg: tuple[float, float] | None = None
     time_offset_range_s: tuple[float, float] = (0.0, 0.0)
     view_fps_choices: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
-        owner = "SceneConfig"
-        _check_range(owner, "num_people", self.num_people, 1, MAX_PEOPLE, integer=True)
-        _check_range(owner, "num_views", self.num_views, MIN_VIEWS, MAX_VIEWS, integer=True)
-        _check_range(owner, "num_frames", self.num_frames, 1, 1_000_000, integer=True)
-        _check_range(owner, "fps", self.fps, 1.0, 1000.0)
-        _check_range(owner, "seed", self.seed, 0, 2**63 - 1, integer=True)
+        super().__post_init__()
+        self._check_counts()
+        focal = ordered_pair(_OWNER, "focal_range_px", self.focal_range_px, *FOCAL_LIMITS_PX)
+        size = _checked_image_size(self.image_size_px)
+        normalised: dict[str, object] = {"focal_range_px": focal, "image_size_px": size,
+                                         "area_size_m": _checked_area(self.area_size_m, self.num_people)}
+        normalised.update(self._checked_layout())
+        normalised.update(self._checked_lenses(focal, size))
+        normalised.update(self._checked_clocks())
+        normalised["fps"] = float(self.fps)
+        normalised["principal_point_offset_px"] = float(self.principal_point_offset_px)
+        # Normalise containers to tuples of floats/ints so that equal configs compare and hash equal.
+        for name, value in normalised.items():
+            object.__setattr__(self, name, value)
+
+    def _check_counts(self) -> None:
+        """Check the rig kind, the H3.6M subject and the views a rig allows (the counts' ranges are the fields')."""
         if self.rig not in RIG_KINDS:
             raise ValueError(f"SceneConfig.rig={self.rig!r} is unknown; allowed: {list(RIG_KINDS)}")
         if self.rig == "h36m" and self.num_views > 4:
@@ -325,93 +211,65 @@ class SceneConfig:
         subjects = {f"S{i}" for i in range(1, 12)}
         if self.h36m_subject not in subjects:
             raise ValueError(f"SceneConfig.h36m_subject={self.h36m_subject!r} is unknown; allowed: S1 .. S11")
-        focal = _check_interval(owner, "focal_range_px", self.focal_range_px, *FOCAL_LIMITS_PX)
-        (w_lo, h_lo), (w_hi, h_hi) = IMAGE_SIZE_LIMITS_PX
-        size = self.image_size_px
-        if not (
-            isinstance(size, (tuple, list))
-            and len(size) == 2
-            and all(isinstance(v, int) and not isinstance(v, bool) for v in size)
-            and w_lo <= size[0] <= w_hi
-            and h_lo <= size[1] <= h_hi
-        ):
-            raise ValueError(
-                f"SceneConfig.image_size_px={size!r} is out of range; allowed: integer (width, height), "
-                f"each side in [{w_lo}, {w_hi}] (e.g. (1920, 1080) or (1080, 1920))"
-            )
-        area = self.area_size_m
-        if not (
-            isinstance(area, (tuple, list))
-            and len(area) == 2
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and 2.0 <= v <= 30.0 for v in area)
-        ):
-            raise ValueError(f"SceneConfig.area_size_m={area!r} is out of range; allowed: (x, y) each in [2, 30] m")
-        min_area = max(4.0, _AREA_PER_PERSON_M2 * self.num_people)
-        if area[0] * area[1] < min_area:
-            raise ValueError(
-                f"SceneConfig.area_size_m={area!r} is too small for {self.num_people} people; "
-                f"allowed: an area of at least {min_area:.1f} m^2"
-            )
-        cam_h = _check_interval(owner, "camera_height_range_m", self.camera_height_range_m, 0.3, 10.0)
-        _check_range(owner, "area_fill", self.area_fill, 0.3, 1.2)
-        _check_range(owner, "out_of_view_spells", self.out_of_view_spells, 0.0, 5.0)
-        _check_range(owner, "principal_point_offset_px", self.principal_point_offset_px, 0.0, 200.0)
-        _check_range(owner, "arc_span_deg", self.arc_span_deg, 30.0, 330.0)
-        elevation = _check_interval(owner, "dome_elevation_range_deg", self.dome_elevation_range_deg, -20.0, 80.0)
-        _check_range(owner, "far_views", self.far_views, 0, min(4, self.num_views - 1), integer=True)
+
+    def _checked_layout(self) -> dict[str, object]:
+        """Check where the cameras stand, the absences, the people's heights, the detector and the behaviour; the
+        normalised (min, max) ranges by field name."""
+        cam_h = ordered_pair(_OWNER, "camera_height_range_m", self.camera_height_range_m, 0.3, 10.0)
+        elevation = ordered_pair(_OWNER, "dome_elevation_range_deg", self.dome_elevation_range_deg, -20.0, 80.0)
+        if self.far_views > self.num_views - 1:
+            raise ValueError(f"SceneConfig.far_views must be {Range(0, self.num_views - 1, integer=True).describe()} "
+                             f"(one view at least is not far), got {self.far_views}")
         if self.far_views and self.rig == "h36m":
             raise ValueError("SceneConfig.far_views must be 0 for rig 'h36m' (its cameras are measured ones)")
-        far = _check_interval(owner, "far_distance_factor", self.far_distance_factor, 1.2, 6.0)
-        heights = _check_interval(owner, "height_range_m", self.height_range_m, 1.4, 2.0)
+        far = ordered_pair(_OWNER, "far_distance_factor", self.far_distance_factor, 1.2, 6.0)
+        heights = ordered_pair(_OWNER, "height_range_m", self.height_range_m, 1.4, 2.0)
         if not isinstance(self.noise, DetectorNoise):
             raise ValueError(f"SceneConfig.noise must be a DetectorNoise, got {type(self.noise).__name__}")
         if self.behaviour not in BEHAVIOURS:
             raise ValueError(f"SceneConfig.behaviour={self.behaviour!r} is unknown; allowed: {list(BEHAVIOURS)}")
-        k1 = _check_interval(owner, "distortion_k1_range", self.distortion_k1_range, *K1_LIMITS)
+        return {"camera_height_range_m": cam_h, "dome_elevation_range_deg": elevation, "far_distance_factor": far,
+                "height_range_m": heights}
+
+    def _checked_lenses(self, focal: tuple[float, float], size: tuple[int, int]) -> dict[str, object]:
+        """Check the lenses (distortion, focal aspect, principal point, field of view) and the camera tilt, given the
+        checked focal range (pixels) and image size (pixels); the normalised values by field name."""
+        k1 = ordered_pair(_OWNER, "distortion_k1_range", self.distortion_k1_range, *K1_LIMITS)
         pitch = self.camera_pitch_range_deg
         if pitch is not None:
-            pitch = _check_interval(owner, "camera_pitch_range_deg", pitch, *PITCH_LIMITS_DEG)
-        k2 = _check_interval(owner, "distortion_k2_range", self.distortion_k2_range, *K2_LIMITS)
-        aspect = _check_interval(owner, "focal_aspect_range", self.focal_aspect_range, *FOCAL_ASPECT_LIMITS)
-        _check_range(owner, "principal_point_offset_max_frac", self.principal_point_offset_max_frac, 0.0,
-                     PRINCIPAL_POINT_FRAC_LIMIT)
+            pitch = ordered_pair(_OWNER, "camera_pitch_range_deg", pitch, *PITCH_LIMITS_DEG)
+        k2 = ordered_pair(_OWNER, "distortion_k2_range", self.distortion_k2_range, *K2_LIMITS)
+        aspect = ordered_pair(_OWNER, "focal_aspect_range", self.focal_aspect_range, *FOCAL_ASPECT_LIMITS)
         if self.principal_point_offset_max_frac and self.principal_point_offset_px:
             raise ValueError("SceneConfig.principal_point_offset_max_frac and principal_point_offset_px are both set; "
                              "allowed: one of them (the other 0)")
         fov = self.horizontal_fov_range_deg
         if fov is not None:
-            fov = _check_interval(owner, "horizontal_fov_range_deg", fov, *FOV_LIMITS_DEG)
+            fov = ordered_pair(_OWNER, "horizontal_fov_range_deg", fov, *FOV_LIMITS_DEG)
             if self.rig == "h36m":
                 raise ValueError("SceneConfig.horizontal_fov_range_deg must be None for rig 'h36m' (its focal lengths "
                                  "are measured ones)")
-        _check_lens(k1, k2, aspect, focal, fov, (int(size[0]), int(size[1])))
-        offsets = _check_interval(owner, "time_offset_range_s", self.time_offset_range_s, *TIME_OFFSET_LIMITS_S)
+        _check_lens(k1, k2, aspect, focal, fov, size)
+        return {"distortion_k1_range": k1, "camera_pitch_range_deg": pitch, "distortion_k2_range": k2,
+                "focal_aspect_range": aspect,
+                "principal_point_offset_max_frac": float(self.principal_point_offset_max_frac),
+                "horizontal_fov_range_deg": fov}
+
+    def _checked_clocks(self) -> dict[str, object]:
+        """Check the views' clocks (time offsets, seconds; frame rates, frames per second); the normalised values by
+        field name."""
+        offsets = ordered_pair(_OWNER, "time_offset_range_s", self.time_offset_range_s, *TIME_OFFSET_LIMITS_S)
         choices = self.view_fps_choices
         if choices is not None:
             if not (isinstance(choices, (tuple, list)) and 1 <= len(choices) <= 8):
                 raise ValueError(f"SceneConfig.view_fps_choices={choices!r} must be None or 1 to 8 frame rates in "
                                  f"[{VIEW_FPS_LIMITS[0]}, {VIEW_FPS_LIMITS[1]}]")
+            rate = Range(*VIEW_FPS_LIMITS)
             for value in choices:
-                _check_range(owner, "view_fps_choices", value, *VIEW_FPS_LIMITS)
+                if not rate.admits(value):
+                    raise ValueError(f"SceneConfig.view_fps_choices: each must be {rate.describe()}, got {value!r}")
             choices = tuple(float(v) for v in choices)
-        # Normalise containers to tuples of floats/ints so that equal configs compare and hash equal.
-        object.__setattr__(self, "distortion_k2_range", k2)
-        object.__setattr__(self, "focal_aspect_range", aspect)
-        object.__setattr__(self, "principal_point_offset_max_frac", float(self.principal_point_offset_max_frac))
-        object.__setattr__(self, "horizontal_fov_range_deg", fov)
-        object.__setattr__(self, "time_offset_range_s", offsets)
-        object.__setattr__(self, "view_fps_choices", choices)
-        object.__setattr__(self, "focal_range_px", focal)
-        object.__setattr__(self, "image_size_px", (int(size[0]), int(size[1])))
-        object.__setattr__(self, "area_size_m", (float(area[0]), float(area[1])))
-        object.__setattr__(self, "camera_height_range_m", cam_h)
-        object.__setattr__(self, "height_range_m", heights)
-        object.__setattr__(self, "distortion_k1_range", k1)
-        object.__setattr__(self, "camera_pitch_range_deg", pitch)
-        object.__setattr__(self, "dome_elevation_range_deg", elevation)
-        object.__setattr__(self, "far_distance_factor", far)
-        object.__setattr__(self, "fps", float(self.fps))
-        object.__setattr__(self, "principal_point_offset_px", float(self.principal_point_offset_px))
+        return {"time_offset_range_s": offsets, "view_fps_choices": choices}
 
     @property
     def duration_s(self) -> float:
@@ -423,17 +281,42 @@ class SceneConfig:
         """Whether the views film on their own clocks (time offsets or per-view frame rates asked for)."""
         return self.time_offset_range_s != (0.0, 0.0) or self.view_fps_choices is not None
 
-    def replace(self, **changes: object) -> SceneConfig:
-        """A copy with some fields changed (validated again).
 
-        Raises:
-            ValueError: an unknown field name, or an invalid value.
-        """
-        known = {f.name for f in fields(self)}
-        unknown = sorted(set(changes) - known)
-        if unknown:
-            raise ValueError(f"SceneConfig has no field(s) {unknown}; fields are {sorted(known)}")
-        return replace(self, **changes)
+
+def _checked_image_size(size: object) -> tuple[int, int]:
+    """Check ``SceneConfig.image_size_px``: integer (width, height), pixels, each side within
+    ``IMAGE_SIZE_LIMITS_PX``; returns it as a tuple of ints."""
+    (w_lo, h_lo), (w_hi, h_hi) = IMAGE_SIZE_LIMITS_PX
+    if not (
+        isinstance(size, (tuple, list))
+        and len(size) == 2
+        and all(isinstance(v, int) and not isinstance(v, bool) for v in size)
+        and w_lo <= size[0] <= w_hi
+        and h_lo <= size[1] <= h_hi
+    ):
+        raise ValueError(
+            f"SceneConfig.image_size_px={size!r} is out of range; allowed: integer (width, height), "
+            f"each side in [{w_lo}, {w_hi}] (e.g. (1920, 1080) or (1080, 1920))"
+        )
+    return int(size[0]), int(size[1])
+
+
+def _checked_area(area: object, num_people: int) -> tuple[float, float]:
+    """Check ``SceneConfig.area_size_m``: (x, y), metres, each side in [2, 30] and large enough for ``num_people``
+    people; returns it as a tuple of floats."""
+    if not (
+        isinstance(area, (tuple, list))
+        and len(area) == 2
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) and 2.0 <= v <= 30.0 for v in area)
+    ):
+        raise ValueError(f"SceneConfig.area_size_m={area!r} is out of range; allowed: (x, y) each in [2, 30] m")
+    min_area = max(4.0, _AREA_PER_PERSON_M2 * num_people)
+    if area[0] * area[1] < min_area:
+        raise ValueError(
+            f"SceneConfig.area_size_m={area!r} is too small for {num_people} people; "
+            f"allowed: an area of at least {min_area:.1f} m^2"
+        )
+    return float(area[0]), float(area[1])
 
 
 def _check_lens(k1: tuple[float, float], k2: tuple[float, float], aspect: tuple[float, float],

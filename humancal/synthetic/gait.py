@@ -111,6 +111,47 @@ def _smooth_noise(rng: np.random.Generator, num_frames: int, fps: float, period_
     return (1.0 - ease) * values[index] + ease * values[index + 1]
 
 
+def _put_walking(
+    c: np.ndarray,
+    cycles: np.ndarray,
+    excursion: np.ndarray,
+    g: np.ndarray,
+    knee_lift: np.ndarray,
+    leg_length_m: float,
+    style: Style,
+) -> None:
+    """Write the walking cycle into the (F, C) channels ``c``, degrees: legs, arm swing, pelvis and trunk, from the
+    (F,) gait cycles (left heel strike at integers), stance excursion (metres), gait scale ``g`` and knee lift
+    (degrees)."""
+
+    def put(name: str, value: np.ndarray | float) -> None:
+        c[:, CHANNEL_INDEX[name]] = value
+
+    left_cycle = cycles % 1.0
+    for side, offset in (("l", 0.0), ("r", 0.5)):
+        u = (cycles + offset) % 1.0
+        hip = np.degrees(np.arcsin(np.clip(_foot_offset(u, excursion) / leg_length_m, -0.8, 0.8)))
+        put(f"hip_flex_{side}", hip + 2.0 * g)
+        swing = _bump_fraction(u, 0.72, 0.22, 0.25)
+        loading = _bump_fraction(u, 0.1, 0.1, 0.1)
+        put(f"knee_flex_{side}", 3.0 + knee_lift * swing + 10.0 * g * loading)
+        heel_strike = _bump_fraction(u, 0.0, 0.08, 0.1)
+        push_off = _bump_fraction(u, 0.57, 0.12, 0.1)
+        put(f"foot_pitch_{side}", 10.0 * g * heel_strike - 25.0 * g * push_off)
+        put(f"toe_ext_{side}", 30.0 * g * _bump_fraction(u, 0.55, 0.1, 0.08))
+        arm = -style.arm_swing * 0.7 * hip
+        put(f"shoulder_flex_{side}", arm + 3.0 * g)
+        put(f"elbow_flex_{side}", style.relaxed_elbow_deg + 0.6 * np.clip(arm, 0.0, None) + 5.0 * g)
+        put(f"arm_elev_{side}", style.relaxed_arm_elev_deg)
+    amplitude = np.degrees(np.arcsin(np.clip(excursion / leg_length_m, 0.0, 0.8)))
+    # The pelvis turns its left side forward with the left leg, the shoulders counter-rotate, and the
+    # pelvis drops on the swing side during single support.
+    put("pelvis_yaw", -0.25 * amplitude * np.cos(2 * np.pi * left_cycle))
+    put("spine_twist", 0.35 * amplitude * np.cos(2 * np.pi * left_cycle))
+    put("pelvis_roll", 3.0 * g * np.cos(4 * np.pi * left_cycle))
+    put("spine_lean", style.lean_deg * np.clip(g, 0.0, 1.0))
+
+
 def gait_channels(
     track: ActivityTrack,
     paths: Paths,
@@ -155,28 +196,7 @@ def gait_channels(
         c[:, CHANNEL_INDEX[name]] = value
 
     left_cycle = cycles % 1.0
-    for side, offset in (("l", 0.0), ("r", 0.5)):
-        u = (cycles + offset) % 1.0
-        hip = np.degrees(np.arcsin(np.clip(_foot_offset(u, excursion) / leg_length_m, -0.8, 0.8)))
-        put(f"hip_flex_{side}", hip + 2.0 * g)
-        swing = _bump_fraction(u, 0.72, 0.22, 0.25)
-        loading = _bump_fraction(u, 0.1, 0.1, 0.1)
-        put(f"knee_flex_{side}", 3.0 + knee_lift * swing + 10.0 * g * loading)
-        heel_strike = _bump_fraction(u, 0.0, 0.08, 0.1)
-        push_off = _bump_fraction(u, 0.57, 0.12, 0.1)
-        put(f"foot_pitch_{side}", 10.0 * g * heel_strike - 25.0 * g * push_off)
-        put(f"toe_ext_{side}", 30.0 * g * _bump_fraction(u, 0.55, 0.1, 0.08))
-        arm = -style.arm_swing * 0.7 * hip
-        put(f"shoulder_flex_{side}", arm + 3.0 * g)
-        put(f"elbow_flex_{side}", style.relaxed_elbow_deg + 0.6 * np.clip(arm, 0.0, None) + 5.0 * g)
-        put(f"arm_elev_{side}", style.relaxed_arm_elev_deg)
-    amplitude = np.degrees(np.arcsin(np.clip(excursion / leg_length_m, 0.0, 0.8)))
-    # The pelvis turns its left side forward with the left leg, the shoulders counter-rotate, and the
-    # pelvis drops on the swing side during single support.
-    put("pelvis_yaw", -0.25 * amplitude * np.cos(2 * np.pi * left_cycle))
-    put("spine_twist", 0.35 * amplitude * np.cos(2 * np.pi * left_cycle))
-    put("pelvis_roll", 3.0 * g * np.cos(4 * np.pi * left_cycle))
-    put("spine_lean", style.lean_deg * np.clip(g, 0.0, 1.0))
+    _put_walking(c, cycles, excursion, g, knee_lift, leg_length_m, style)
 
     # Standing still is never perfectly still: slow sway, weight shifts and looking around.
     still = 1.0 - np.clip(g, 0.0, 1.0)

@@ -19,7 +19,8 @@ placed at a random image position and depth (a reflection, a poster, a passer-by
 part. Every random number comes from the one generator passed in, in a fixed order. A person out of the
 capture (``hidden``: the scene's ``out_of_view_spells``) is in no image: nobody detects or is occluded by them.
 Views on their own clocks (unsynchronised videos) go through :func:`simulate_view_detections`: each view with the
-people's keypoints at its own frames' times, numbered by its own frames.
+people's keypoints at its own frames' times, numbered by its own frames. The per-joint pieces (lens fold, image
+bounds, jitter, confidence) are in :mod:`humancal.synthetic.detector_errors`.
 """
 
 from __future__ import annotations
@@ -30,20 +31,19 @@ import numpy as np
 
 from humancal.camera import Camera, project_points
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX, NUM_JOINTS, joint_indices
-from humancal.synthetic.config import DetectorNoise
-from humancal.synthetic.lenses import fold_radius
+from humancal.synthetic.detector_errors import (
+    border_distance_px,
+    distort,
+    inside_image,
+    jitter_px,
+    joint_scores,
+    lens_fold_radius,
+    within_lens,
+)
+from humancal.synthetic.detector_noise import DetectorNoise
 from humancal.synthetic.occlusion import occlusion_degree
 
-__all__ = ["DetectorNoise", "DetectorOutput", "JOINT_NOISE_WEIGHTS", "draw_keypoint_bias", "simulate_detections",
-           "simulate_view_detections"]
-
-_COCO_SIGMAS = np.array(
-    [0.026, 0.025, 0.025, 0.035, 0.035, 0.079, 0.079, 0.072, 0.072, 0.062, 0.062]
-    + [0.107, 0.107, 0.087, 0.087, 0.089, 0.089]
-    + [0.08] * 6
-)
-JOINT_NOISE_WEIGHTS: np.ndarray = _COCO_SIGMAS / _COCO_SIGMAS.mean()
-"""(23,) relative jitter of each canonical joint: the COCO keypoint sigmas (foot points 0.08), mean 1."""
+__all__ = ["DetectorNoise", "DetectorOutput", "draw_keypoint_bias", "simulate_detections", "simulate_view_detections"]
 
 _FLIP = np.array(FLIP_INDEX)
 _HIPS = joint_indices(["left_hip", "right_hip"])
@@ -111,83 +111,6 @@ def draw_keypoint_bias(std_m: float, rng: np.random.Generator) -> np.ndarray:
     return offsets
 
 
-def _fold_radius(distortion: np.ndarray) -> float:
-    """Undistorted radius (normalised image coordinates) where the camera's radial lens model stops growing
-    (:func:`humancal.synthetic.lenses.fold_radius` of its k1, k2, k3), inf for an ideal pinhole."""
-    k1, k2, _, _, k3 = np.asarray(distortion, dtype=np.float64)
-    return fold_radius(k1, k2, k3)
-
-
-def _within_lens(camera: Camera, points_world_m: np.ndarray) -> np.ndarray:
-    """(...,) whether each point lies inside the radius where the camera's lens model is one-to-one."""
-    fold = _fold_radius(camera.distortion)
-    if not np.isfinite(fold):
-        return np.ones(points_world_m.shape[:-1], bool)
-    x_cam = points_world_m @ camera.R_cam_from_world.T + camera.t_cam_from_world_m
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.hypot(x_cam[..., 0], x_cam[..., 1]) / x_cam[..., 2]
-    return np.nan_to_num(r, nan=np.inf) < fold
-
-
-def _distort(uv: np.ndarray, distortion: np.ndarray) -> np.ndarray:
-    """OpenCV lens distortion of normalised image points ``uv`` (N, J, 2) with per-row coefficients (N, 5)."""
-    k1, k2, p1, p2, k3 = (distortion[:, i, None] for i in range(5))
-    x, y = uv[..., 0], uv[..., 1]
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    return np.stack(
-        [
-            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-        ],
-        axis=-1,
-    )
-
-
-def _inside(pixels_px: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
-    x, y = pixels_px[..., 0], pixels_px[..., 1]
-    with np.errstate(invalid="ignore"):
-        return (x >= 0.0) & (x < width_px) & (y >= 0.0) & (y < height_px)
-
-
-def _border_distance_px(pixels_px: np.ndarray, width_px: int, height_px: int) -> np.ndarray:
-    x, y = pixels_px[..., 0], pixels_px[..., 1]
-    return np.minimum(np.minimum(x, width_px - x), np.minimum(y, height_px - y))
-
-
-def _scores(
-    noise: DetectorNoise,
-    noise_draw: np.ndarray,
-    occlusion: np.ndarray,
-    pixels_px: np.ndarray,
-    scale_px: np.ndarray,
-    camera: Camera,
-) -> np.ndarray:
-    """Confidences (P, F, 23) of real people's joints (step 5 of the module docstring)."""
-    margin = np.maximum(noise.border_margin_frac * scale_px, 1e-6)[..., None]
-    near_border = np.clip(1.0 - _border_distance_px(pixels_px, camera.width_px, camera.height_px) / margin, 0.0, 1.0)
-    score = noise.score_mean + noise.score_std * noise_draw - noise.occlusion_score_drop * occlusion
-    score = score - noise.border_score_drop * np.nan_to_num(near_border, nan=1.0)
-    return np.clip(score, 0.01, 1.0)
-
-
-def _jitter(
-    noise: DetectorNoise,
-    draws: np.ndarray,
-    outlier: np.ndarray,
-    outlier_draws: np.ndarray,
-    occlusion: np.ndarray | float,
-    scale_px: np.ndarray,
-) -> np.ndarray:
-    """Pixel offsets (..., 23, 2) from standard-normal ``draws`` (..., 23, 2), for apparent heights
-    ``scale_px`` (...,) and occlusion degrees (..., 23); ``outlier`` (..., 23) marks gross outliers."""
-    inflation = 1.0 + (noise.occluded_jitter_factor - 1.0) * occlusion
-    std = noise.jitter_std_frac * JOINT_NOISE_WEIGHTS * scale_px[..., None] * inflation
-    offsets = std[..., None] * draws
-    outliers = noise.outlier_std_frac * scale_px[..., None, None] * outlier_draws
-    return offsets + np.where(outlier[..., None], outliers, 0.0)
-
-
 def _view_detections(
     keypoints_world_m: np.ndarray,
     height_m: np.ndarray,
@@ -199,11 +122,11 @@ def _view_detections(
     """Detections of the real people in one view (see the module docstring, steps 1-7)."""
     num_people, num_frames = keypoints_world_m.shape[:2]
     pixels, depth = project_points(camera, keypoints_world_m)
-    in_front = (np.nan_to_num(depth, nan=-1.0) > 0.05) & _within_lens(camera, keypoints_world_m)
+    in_front = (np.nan_to_num(depth, nan=-1.0) > 0.05) & within_lens(camera, keypoints_world_m)
     if hidden is not None:
         in_front &= ~hidden[..., None]
     pixels = np.where(in_front[..., None], pixels, np.nan)
-    in_image = in_front & _inside(pixels, camera.width_px, camera.height_px)
+    in_image = in_front & inside_image(pixels, camera.width_px, camera.height_px)
     pelvis_depth = np.maximum(depth[..., _HIPS].mean(axis=-1), 0.1)
     scale = camera.K[0, 0] * height_m[:, None] / pelvis_depth
     occ = occlusion_degree(pixels, depth, camera.K[0, 0])
@@ -218,10 +141,10 @@ def _view_detections(
     person_miss = rng.random((num_people, num_frames)) < noise.person_miss_rate
     flip = rng.random((num_people, num_frames)) < noise.flip_rate
 
-    detected_px = pixels + _jitter(noise, jitter_draws, outlier, outlier_draws, occ, scale)
-    scores = _scores(noise, score_draws, occ, detected_px, scale, camera)
+    detected_px = pixels + jitter_px(noise, jitter_draws, outlier, outlier_draws, occ, scale)
+    scores = joint_scores(noise, score_draws, occ, detected_px, scale, camera)
     miss_probability = noise.joint_miss_rate + (noise.occluded_joint_miss_rate - noise.joint_miss_rate) * occ
-    present = in_image & _inside(detected_px, camera.width_px, camera.height_px) & (miss_draws >= miss_probability)
+    present = in_image & inside_image(detected_px, camera.width_px, camera.height_px) & (miss_draws >= miss_probability)
     detected = eligible & ~person_miss & (present.sum(axis=-1) >= noise.min_visible_joints)
 
     p_idx, f_idx = np.nonzero(detected)
@@ -290,15 +213,15 @@ def _false_positives(
     in_front = x_cam[..., 2] > 0.05
     distortion = np.stack([c.distortion for c in cameras])[view]
     if np.any(distortion):
-        fold = np.array([_fold_radius(c.distortion) for c in cameras])[view]
+        fold = np.array([lens_fold_radius(c.distortion) for c in cameras])[view]
         with np.errstate(invalid="ignore"):
             in_front &= np.nan_to_num(np.hypot(uv[..., 0], uv[..., 1]), nan=np.inf) < fold[:, None]
-            uv = _distort(uv, distortion)
+            uv = distort(uv, distortion)
     focal = np.stack([K[:, 0, 0], K[:, 1, 1]], axis=-1)[:, None, :]
     centre = np.stack([K[:, 0, 2], K[:, 1, 2]], axis=-1)[:, None, :]
     pixels = uv * focal + centre
     scale = K[:, 0, 0] * height_m[source_person] / depth
-    detected_px = pixels + _jitter(noise, jitter_draws, np.zeros((n, NUM_JOINTS), bool), jitter_draws, 0.0, scale)
+    detected_px = pixels + jitter_px(noise, jitter_draws, np.zeros((n, NUM_JOINTS), bool), jitter_draws, 0.0, scale)
     inside = in_front & (detected_px[..., 0] >= 0) & (detected_px[..., 0] < size[:, None, 0])
     inside &= (detected_px[..., 1] >= 0) & (detected_px[..., 1] < size[:, None, 1])
     keep_part = np.ones((n, NUM_JOINTS), bool)
@@ -310,7 +233,7 @@ def _false_positives(
     needed = np.minimum(noise.min_visible_joints, keep_part.sum(axis=1))
     keep = present.sum(axis=1) >= np.maximum(needed, 2)
     margin = np.maximum(noise.border_margin_frac * scale, 1e-6)
-    border = _border_distance_px(detected_px, size[:, None, 0], size[:, None, 1])
+    border = border_distance_px(detected_px, size[:, None, 0], size[:, None, 1])
     near_border = np.clip(1.0 - border / margin[:, None], 0.0, 1.0)
     score = noise.false_positive_score_mean + score_offset[:, None] + noise.score_std * score_draws
     score = np.clip(score - noise.border_score_drop * np.nan_to_num(near_border, nan=1.0), 0.01, 1.0)

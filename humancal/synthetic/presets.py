@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from types import MappingProxyType
 
-from humancal.synthetic.config import DetectorNoise, SceneConfig
+from humancal.synthetic.config import SceneConfig
+from humancal.synthetic.detector_noise import DetectorNoise
 
 __all__ = ["PRESETS", "preset", "preset_names"]
 

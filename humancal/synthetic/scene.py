@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from humancal.body import PHENOTYPE_NAMES, BodyModel
+from humancal.body import PHENOTYPE_NAMES, BodyModel, RestSkeleton
 from humancal.camera import Camera, cameras_to_table
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
 from humancal.synthetic.clocks import ViewClocks, draw_clocks, hidden_at, keypoints_at, synced_clocks
@@ -245,6 +245,80 @@ def _motions_table(sequence: str, people: People, motions: Motions) -> pd.DataFr
     return validate_table(df, "motions", source="synthetic scene")
 
 
+def _detector_keypoints(
+    config: SceneConfig, body: BodyModel, rest: RestSkeleton, motions: Motions, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """The (P, F, 23, 3) keypoints the detector sees, world metres, and its (23, 3) keypoint bias, metres: the
+    ground truth and zeros, or (``DetectorNoise.keypoint_bias_m``) what the detector calls a joint, the model's
+    keypoints moved in the bones by a drawn bias."""
+    detected_m, bias_m = motions.keypoints_world_m, np.zeros((NUM_JOINTS, 3))
+    if config.noise.keypoint_bias_m > 0:  # what the detector calls a joint: the model's keypoints moved in the bones
+        bias_m = draw_keypoint_bias(config.noise.keypoint_bias_m, rng)
+        offsets = torch.as_tensor(bias_m, dtype=body.dtype, device=body.device)
+        with torch.no_grad():
+            detected_m = body.keypoints(rest.with_keypoint_offsets(offsets),
+                                        torch.as_tensor(motions.bone_rotmats_local, dtype=body.dtype,
+                                                        device=body.device),
+                                        torch.as_tensor(motions.root_translation_m, dtype=body.dtype,
+                                                        device=body.device)).double().cpu().numpy()
+    return detected_m, bias_m
+
+
+def _simulate_detector(
+    config: SceneConfig,
+    clocks: ViewClocks,
+    detected_m: np.ndarray,
+    people: People,
+    rig: list[Camera],
+    hidden: np.ndarray | None,
+    rng: np.random.Generator,
+) -> DetectorOutput:
+    """The simulated detections of every view, from the (P, F_ref, 23, 3) keypoints ``detected_m`` (world metres)
+    on the reference clock: each view at its own frames' times when the views are unsynchronised."""
+    if config.unsynced:
+        views = range(len(rig))
+        return simulate_view_detections([keypoints_at(detected_m, clocks, v) for v in views], list(clocks.frames),
+                                        people.height_m, rig, config.noise, rng,
+                                        [hidden_at(hidden, clocks, v) for v in views])
+    return simulate_detections(detected_m, people.height_m, rig, config.noise, rng, hidden)
+
+
+def _assemble_scene(
+    config: SceneConfig,
+    sequence: str,
+    people: People,
+    motions: Motions,
+    rig: list[Camera],
+    detector: DetectorOutput,
+    det_id: np.ndarray,
+    bias_m: np.ndarray,
+    clocks: ViewClocks,
+) -> SyntheticScene:
+    """The :class:`SyntheticScene`: its canonical tables built from the raw data, and the raw data."""
+    return SyntheticScene(
+        config=config,
+        sequence=sequence,
+        detections=_detections_table(sequence, detector, det_id),
+        cameras=cameras_to_table(rig, sequence),
+        poses3d=_poses3d_table(sequence, people.person_ids, motions.keypoints_world_m),
+        associations=_associations_table(sequence, detector, det_id),
+        people=_people_table(sequence, people),
+        motions=_motions_table(sequence, people, motions),
+        rig=tuple(rig),
+        person_ids=people.person_ids,
+        phenotypes=people.phenotypes,
+        height_m=people.height_m,
+        bone_rotmats_local=motions.bone_rotmats_local,
+        root_translation_m=motions.root_translation_m,
+        keypoints_world_m=motions.keypoints_world_m,
+        activity=motions.activity,
+        detector=detector,
+        det_id=det_id,
+        keypoint_bias_m=bias_m,
+        clocks=clocks,
+    )
+
+
 def generate_scene(
     config: SceneConfig,
     body: BodyModel,
@@ -291,48 +365,12 @@ def generate_scene(
     rig = make_rig(config, rng_rig)
     report("cameras", 0.45)
     hidden = _out_of_view(config, clocks.reference_frames, rng_absence)
-    detected_m, bias_m = motions.keypoints_world_m, np.zeros((NUM_JOINTS, 3))
-    if config.noise.keypoint_bias_m > 0:  # what the detector calls a joint: the model's keypoints moved in the bones
-        bias_m = draw_keypoint_bias(config.noise.keypoint_bias_m, rng_bias)
-        offsets = torch.as_tensor(bias_m, dtype=body.dtype, device=body.device)
-        with torch.no_grad():
-            detected_m = body.keypoints(rest.with_keypoint_offsets(offsets),
-                                        torch.as_tensor(motions.bone_rotmats_local, dtype=body.dtype,
-                                                        device=body.device),
-                                        torch.as_tensor(motions.root_translation_m, dtype=body.dtype,
-                                                        device=body.device)).double().cpu().numpy()
-    if config.unsynced:
-        views = range(len(rig))
-        detector = simulate_view_detections([keypoints_at(detected_m, clocks, v) for v in views], list(clocks.frames),
-                                            people.height_m, rig, config.noise, rng_noise,
-                                            [hidden_at(hidden, clocks, v) for v in views])
-    else:
-        detector = simulate_detections(detected_m, people.height_m, rig, config.noise, rng_noise, hidden)
+    detected_m, bias_m = _detector_keypoints(config, body, rest, motions, rng_bias)
+    detector = _simulate_detector(config, clocks, detected_m, people, rig, hidden, rng_noise)
     det_id = _assign_det_ids(detector.frame, detector.view, rng_ids)
     report("detections", 0.8)
 
-    scene = SyntheticScene(
-        config=config,
-        sequence=sequence,
-        detections=_detections_table(sequence, detector, det_id),
-        cameras=cameras_to_table(rig, sequence),
-        poses3d=_poses3d_table(sequence, people.person_ids, motions.keypoints_world_m),
-        associations=_associations_table(sequence, detector, det_id),
-        people=_people_table(sequence, people),
-        motions=_motions_table(sequence, people, motions),
-        rig=tuple(rig),
-        person_ids=people.person_ids,
-        phenotypes=people.phenotypes,
-        height_m=people.height_m,
-        bone_rotmats_local=motions.bone_rotmats_local,
-        root_translation_m=motions.root_translation_m,
-        keypoints_world_m=motions.keypoints_world_m,
-        activity=motions.activity,
-        detector=detector,
-        det_id=det_id,
-        keypoint_bias_m=bias_m,
-        clocks=clocks,
-    )
+    scene = _assemble_scene(config, sequence, people, motions, rig, detector, det_id, bias_m, clocks)
     report("tables", 1.0)
     logger.info(
         "synthetic scene %r: %d people, %d views, %d frames, %d detections in %.2f s",
