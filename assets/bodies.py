@@ -15,6 +15,7 @@ from assets.settings import BodyFitSettings
 from humancal.camera import CameraRig
 from humancal.fitting import body_observations, fit_bodies
 from humancal.fitting.plot import plot_fit_reprojection, plot_fit_scene
+from humancal.geometry.rotations import rotation_distance_deg
 from humancal.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
 from humancal.viewing.pictures import plot_reprojection_errors
@@ -108,11 +109,9 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
 def _camera_changes(before: CameraRig, after: CameraRig) -> dict[str, float]:
     """How far the refinement moved the cameras (means over views): focal %, centre mm, orientation deg."""
     focal = np.sqrt(after.K[:, 0, 0] * after.K[:, 1, 1]) / np.sqrt(before.K[:, 0, 0] * before.K[:, 1, 1])
-    relative = np.einsum("vij,vkj->vik", after.R_cam_from_world, before.R_cam_from_world)
-    cos = np.clip((np.trace(relative, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
     return {
         "focal_change_pct": float(np.mean(np.abs(focal - 1.0)) * 100.0),
         "centre_change_mm": float(np.linalg.norm(after.centers_world_m - before.centers_world_m, axis=1).mean()
                                   * 1000.0),
-        "angle_change_deg": float(np.degrees(np.arccos(cos)).mean()),
+        "angle_change_deg": float(rotation_distance_deg(after.R_cam_from_world, before.R_cam_from_world).mean()),
     }

@@ -31,7 +31,7 @@ from humancal.associations import Associations
 from humancal.calibration.types import ankle_midpoints, hip_midpoints
 from humancal.camera import Camera
 from humancal.detections import DenseDetections, detections_to_dense
-from humancal.geometry.rotations import axis_angle_to_rotmat
+from humancal.geometry.rotations import angle_between_deg, axis_angle_to_rotmat
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX
 from humancal.lifter import LiftedPoses
 
@@ -78,10 +78,6 @@ def upright_scores(keypoints: np.ndarray) -> np.ndarray:
     """
     X = np.asarray(keypoints, dtype=np.float64)
 
-    def angle_deg(a, b):
-        cos = (a * b).sum(-1) / (np.linalg.norm(a, axis=-1) * np.linalg.norm(b, axis=-1))
-        return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-
     shoulders = 0.5 * (X[:, _J["left_shoulder"]] + X[:, _J["right_shoulder"]])
     hips = hip_midpoints(X)
     axis = shoulders - ankle_midpoints(X)
@@ -90,8 +86,8 @@ def upright_scores(keypoints: np.ndarray) -> np.ndarray:
     for side in ("left", "right"):
         thigh = X[:, _J[f"{side}_knee"]] - X[:, _J[f"{side}_hip"]]
         shank = X[:, _J[f"{side}_ankle"]] - X[:, _J[f"{side}_knee"]]
-        knee.append(angle_deg(thigh, shank))
-        hip.append(angle_deg(thigh, hips - shoulders))
+        knee.append(angle_between_deg(thigh, shank))
+        hip.append(angle_between_deg(thigh, hips - shoulders))
     knee_deg = np.maximum(np.maximum(knee[0], knee[1]) - 5.0, 0.0)
     hip_deg = np.maximum(np.maximum(hip[0], hip[1]) - 10.0, 0.0)
     ankle_dz_m = np.abs(((X[:, _J["left_ankle"]] - X[:, _J["right_ankle"]]) * axis).sum(1))

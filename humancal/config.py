@@ -18,7 +18,7 @@ ValueError: ToyConfig.scale_m must be a positive number, got 0.0
 >>> ToyConfig().replace(scale=1.0)
 Traceback (most recent call last):
 ...
-ValueError: ToyConfig has no field(s) ['scale']
+ValueError: ToyConfig has no field(s) ['scale']; fields are ['min_views', 'scale_m']
 
 A subclass with further checks (between fields, of types, of choices) defines its own ``__post_init__`` and calls
 ``super().__post_init__()`` first.
@@ -147,9 +147,10 @@ class Config:
         Raises:
             ValueError: an unknown field, or a value the config does not admit.
         """
-        unknown = sorted(set(changes) - {f.name for f in fields(self)})
+        known = sorted(f.name for f in fields(self))
+        unknown = sorted(set(changes) - set(known))
         if unknown:
-            raise ValueError(f"{type(self).__name__} has no field(s) {unknown}")
+            raise ValueError(f"{type(self).__name__} has no field(s) {unknown}; fields are {known}")
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:

@@ -6,7 +6,8 @@ torch); a tensor in, a tensor out (differentiable, its dtype and device kept).
 
 Representations (``docs/conventions.md``): rotation matrices ``(..., 3, 3)`` inside the library; rotation
 vectors (axis times angle, radians) ``(..., 3)`` at file boundaries; the 6D form is the first two columns of the
-matrix, ``(..., 3, 2)``.
+matrix, ``(..., 3, 2)``; quaternions ``(..., 4)`` are (x, y, z, w), the order of roma, scipy and glTF (COLMAP
+writes (w, x, y, z): its reader and writer reorder).
 
 Example:
     >>> import numpy as np
@@ -37,6 +38,10 @@ __all__ = [
     "rotation_angle_deg",
     "rotation_distance_deg",
     "rotmat_a_to_b",
+    "rotmat_to_quat_xyzw",
+    "quat_xyzw_to_rotmat",
+    "rotmat_to_euler_deg",
+    "angle_between_deg",
 ]
 
 Array = TypeVar("Array", np.ndarray, torch.Tensor)
@@ -198,3 +203,69 @@ def rotmat_a_to_b(a: Array, b: Array) -> Array:
     _check_last(a, (3,), "a")
     _check_last(b, (3,), "b")
     return _torch_op(_a_to_b, a, b)
+
+
+def rotmat_to_quat_xyzw(R: Array) -> Array:
+    """Unit quaternions of rotations, (x, y, z, w). ``q`` and ``-q`` are the same rotation: either may come out.
+
+    Args:
+        R: (..., 3, 3) rotation matrices.
+
+    Returns:
+        (..., 4) unit quaternions (x, y, z, w).
+    """
+    _check_last(R, (3, 3), "R")
+    return _torch_op(roma.rotmat_to_unitquat, R)
+
+
+def quat_xyzw_to_rotmat(q: Array) -> Array:
+    """Rotation matrices of quaternions (x, y, z, w), normalised first.
+
+    Args:
+        q: (..., 4) quaternions (x, y, z, w), not zero.
+
+    Returns:
+        (..., 3, 3) rotation matrices.
+    """
+    _check_last(q, (4,), "q")
+    return _torch_op(lambda x: roma.unitquat_to_rotmat(roma.quat_normalize(x)), q)
+
+
+def rotmat_to_euler_deg(R: Array, order: str) -> Array:
+    """Euler angles of rotations, degrees.
+
+    Args:
+        R: (..., 3, 3) rotation matrices.
+        order: three axis letters, upper case for intrinsic rotations (``"YZX"``: ``R = R_y(a) @ R_z(b) @ R_x(c)``),
+            lower case for extrinsic ones. At gimbal lock the third angle is 0 (the angles still give ``R``).
+
+    Returns:
+        (..., 3) angles in ``order``, degrees: the first and third in (-180, 180], the middle one in [-90, 90]
+        (Tait-Bryan orders) or [0, 180] (proper Euler orders).
+    """
+    _check_last(R, (3, 3), "R")
+    return _torch_op(lambda r: roma.rotmat_to_euler(order, r, degrees=True), R)
+
+
+def angle_between_deg(a: Array, b: Array) -> Array:
+    """Angle between directions, degrees in [0, 180] (robust near 0 and 180: ``atan2(|a x b|, a . b)``).
+
+    Args:
+        a, b: (..., 3) directions (any length but zero; broadcast).
+
+    Returns:
+        (...) angles, degrees.
+
+    Example:
+        >>> import numpy as np
+        >>> float(angle_between_deg(np.array([1.0, 0.0, 0.0]), np.array([1.0, 1.0, 0.0])).round(6))
+        45.0
+    """
+    _check_last(a, (3,), "a")
+    _check_last(b, (3,), "b")
+
+    def angle(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        u, v = torch.broadcast_tensors(u, v)
+        return torch.rad2deg(torch.atan2(torch.linalg.norm(torch.linalg.cross(u, v), dim=-1), (u * v).sum(-1)))
+
+    return _torch_op(angle, a, b)

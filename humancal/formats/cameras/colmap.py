@@ -21,12 +21,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humancal.camera import Camera
 from humancal.formats._io import atomic_write_texts, read_text
 from humancal.formats.cameras._checks import camera_names, check_writable, make_camera
 from humancal.formats.errors import FormatError
+from humancal.geometry.rotations import quat_xyzw_to_rotmat, rotmat_to_quat_xyzw
 
 __all__ = ["COLMAP_MODELS", "read_colmap_text", "write_colmap_text", "colmap_paths"]
 
@@ -150,7 +150,7 @@ def write_colmap_text(
         else:
             model, params = "FULL_OPENCV", pinhole + list(d) + [0.0, 0.0, 0.0]
         cam_lines.append(f"{v + 1} {model} {cam.width_px} {cam.height_px} " + " ".join(_num(p) for p in params))
-        x, y, z, w = Rotation.from_matrix(cam.R_cam_from_world).as_quat()
+        x, y, z, w = rotmat_to_quat_xyzw(cam.R_cam_from_world)
         q = np.array([w, x, y, z]) * (1 if w >= 0 else -1)
         t = cam.t_cam_from_world_m / length_unit_m
         img_lines += [" ".join([str(v + 1), *(_num(c) for c in (*q, *t)), str(v + 1), name]), ""]
@@ -228,7 +228,7 @@ def _image_record(line: str, lineno: int, path: Path, intrinsics: dict) -> tuple
     if abs(norm - 1.0) > _QUATERNION_TOLERANCE:
         expected = f"a unit quaternion (|q| within {_QUATERNION_TOLERANCE:g} of 1)"
         raise FormatError(path, f"{field} QW QX QY QZ", expected, f"|q| = {norm:.6g}")
-    R = Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+    R = quat_xyzw_to_rotmat(np.array([q[1], q[2], q[3], q[0]]))
     name = " ".join(tokens[9:])
     return image_id, R, t, camera_id, name, f"{field} QW QX QY QZ"
 

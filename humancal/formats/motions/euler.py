@@ -2,19 +2,16 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from humancal.geometry.rotations import rotmat_to_euler_deg
 
 __all__ = ["continuous_euler_deg"]
 
 
 def _principal(rotmats: np.ndarray, order: str) -> np.ndarray:
-    flat = rotmats.reshape(-1, 3, 3)
-    with warnings.catch_warnings():  # at gimbal lock scipy still returns angles that reproduce the matrix
-        warnings.simplefilter("ignore", UserWarning)
-        angles = Rotation.from_matrix(flat).as_euler(order.upper())
+    """Intrinsic Euler angles in ``order``, radians (at gimbal lock, angles that still reproduce the matrix)."""
+    angles = np.deg2rad(rotmat_to_euler_deg(rotmats.reshape(-1, 3, 3), order.upper()))
     return angles.reshape(rotmats.shape[:-2] + (3,))
 
 

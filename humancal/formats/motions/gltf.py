@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 import pygltflib as gl
 import trimesh
-from scipy.spatial.transform import Rotation
 
 from humancal.body import BodyModel
 from humancal.fitting import FittedMotions
@@ -33,6 +32,7 @@ from humancal.formats.motions._common import (
     person_spans,
 )
 from humancal.formats.motions._glb import GlbBuilder
+from humancal.geometry.rotations import rotmat_to_quat_xyzw
 from humancal.formats.motions.rig import (
     PersonRig,
     animated_bones,
@@ -50,7 +50,7 @@ MAX_INFLUENCES = 8
 
 def _quaternions_xyzw(rotmats: np.ndarray) -> np.ndarray:
     """(..., 3, 3) -> (..., 4) unit quaternions (x, y, z, w), sign-continuous along axis 0 for SLERP."""
-    quat = Rotation.from_matrix(rotmats.reshape(-1, 3, 3)).as_quat().reshape(rotmats.shape[:-2] + (4,))
+    quat = rotmat_to_quat_xyzw(rotmats.reshape(-1, 3, 3)).reshape(rotmats.shape[:-2] + (4,))
     for t in range(1, quat.shape[0]):
         flip = (quat[t] * quat[t - 1]).sum(-1) < 0.0
         quat[t][flip] *= -1.0
@@ -60,7 +60,7 @@ def _quaternions_xyzw(rotmats: np.ndarray) -> np.ndarray:
 def _trs(matrix: np.ndarray) -> dict[str, list[float]]:
     return {
         "translation": [float(v) for v in matrix[:3, 3]],
-        "rotation": [float(v) for v in Rotation.from_matrix(matrix[:3, :3]).as_quat()],
+        "rotation": [float(v) for v in rotmat_to_quat_xyzw(matrix[:3, :3])],
     }
 
 
@@ -106,7 +106,7 @@ def _add_person(
                                          skin=len(builder.gltf.skins) - 1))
     person_node = builder.add_node(gl.Node(
         name=f"person_{span.person_id}", children=[first_joint, mesh_node],
-        rotation=[float(v) for v in Rotation.from_matrix(R_YUP_FROM_ZUP).as_quat()],
+        rotation=[float(v) for v in rotmat_to_quat_xyzw(R_YUP_FROM_ZUP)],
     ))
     builder.gltf.scenes[0].nodes.append(person_node)
 
