@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -54,7 +54,6 @@ from humancal.calibration.bundle_terms import (
     _robust_cost,
     _normal_equations,
     _solve,
-    _arrow,
 )
 from humancal.calibration.bundle_setup import (
     BundleSetup,
@@ -63,20 +62,19 @@ from humancal.calibration.bundle_setup import (
     free_parameters,
     start_cameras,
 )
+from humancal.calibration.bundle_uncertainty import camera_std
 from humancal.calibration.types import CalibrationError
 from humancal.lifter.lifted import LiftedPoses
 from humancal.detections import DenseDetections
 from humancal.geometry.rotations import rotvec_to_rotmat
-from humancal.least_squares import Damping, Stop, levenberg_marquardt, solve_damped
+from humancal.least_squares import Damping, Stop, levenberg_marquardt
 
 __all__ = ["BundleResult", "bundle_adjust", "focal_bounds_from_fov"]
 
-_REPEAT_DISTANCE_M = 0.1
-"""Two groups whose keypoints are this close on average (metres) repeat one another (one still person seen in two
-frames): their lifter and detector errors are the same, so they count as one in the focal uncertainty."""
-
 _STILL_ITERATIONS = 3
-"""Iterations in a row with the cameras still (``camera_tolerance``) after which the bundle adjustment stops."""
+"""Iterations in a row with the cameras still (``camera_tolerance``) after which the bundle adjustment stops: the
+points and sizes can crawl on for tens of iterations at a relative cost decrease of 1e-5 while the cameras move by
+less than 1e-5; along a flat valley the cameras still move, and it does not fire."""
 
 _DAMPING = Damping(start=1e-3, grow=10.0, shrink=5.0, floor=1e-7, attempts=10)
 """The Levenberg-Marquardt schedule: ten refusals in a row (damping 1e-3 -> 1e7 times the diagonal) end it."""
@@ -109,7 +107,7 @@ class BundleResult:
         cost: the final robust cost (comparable between runs on the same groups and priors).
         distortion: (V, 5) OpenCV ``(k1, k2, p1, p2, k3)`` of every view (zeros without a lens model).
         principal_point_px: (V, 2) principal points (the ones given unless ``principal_point`` let them move).
-        lens_std: (V, 4) std of ``k1, k2, dcx_px, dcy_px`` as the focal's (:func:`_camera_std`); NaN where held.
+        lens_std: (V, 4) std of ``k1, k2, dcx_px, dcy_px`` as the focal's (:func:`.bundle_uncertainty.camera_std`); NaN where held.
         detection_error_sigma: (S,) per detection of the groups (the rows of ``np.concatenate(groups)``, in that
             order) the median reprojection error of its keypoints in units of their std (1 % of the person's
             image extent, at least 1 px; see the module docstring), NaN where none of its keypoints was used:
@@ -157,40 +155,20 @@ def focal_bounds_from_fov(width_px: np.ndarray, fov_range_deg: tuple[float, floa
 
 
 def bundle_adjust(
-    detections: DenseDetections,
-    lifted: LiftedPoses,
-    groups: list[np.ndarray],
-    points_world_m: np.ndarray,
-    fx_px: np.ndarray,
-    fy_px: np.ndarray,
-    principal_point_px: np.ndarray,
-    R_cam_from_world: np.ndarray,
-    t_cam_from_world_m: np.ndarray,
-    *,
-    square_pixels: bool = True,
-    focal_prior_px: np.ndarray | None = None,
-    focal_prior_rel_std: np.ndarray | None = None,
-    shape_std_m: float = 0.1,
-    group_scale_std: float | None = None,
-    focal_bounds_px: np.ndarray | None = None,
-    min_score: float = 0.2,
-    huber: float = 2.5,
-    max_iterations: int = 40,
-    tolerance: float = 1e-6,
-    camera_tolerance: float = 2e-5,
-    hold_views: Sequence[int] = (),
-    lens: str = "pinhole",
-    principal_point: bool = False,
-    lens_start: np.ndarray | None = None,
-    lens_prior_std: tuple[float, float, float] = (0.25, 0.1, 50.0),
-    hold_lens_views: Sequence[int] = (),
+    detections: DenseDetections, lifted: LiftedPoses, groups: list[np.ndarray], points_world_m: np.ndarray,
+    fx_px: np.ndarray, fy_px: np.ndarray, principal_point_px: np.ndarray, R_cam_from_world: np.ndarray,
+    t_cam_from_world_m: np.ndarray, *, square_pixels: bool = True, focal_prior_px: np.ndarray | None = None,
+    focal_prior_rel_std: np.ndarray | None = None, shape_std_m: float = 0.1, group_scale_std: float | None = None,
+    focal_bounds_px: np.ndarray | None = None, min_score: float = 0.2, huber: float = 2.5, max_iterations: int = 40,
+    tolerance: float = 1e-6, camera_tolerance: float = 2e-5, hold_views: Sequence[int] = (), lens: str = "pinhole",
+    principal_point: bool = False, lens_start: np.ndarray | None = None,
+    lens_prior_std: tuple[float, float, float] = (0.25, 0.1, 50.0), hold_lens_views: Sequence[int] = (),
     adjust_cameras: bool = True,
 ) -> BundleResult:
     """Refine focal lengths, rotations, translations and the groups' keypoints (see the module docstring).
 
     Args:
-        detections: all detections.
-        lifted: their lifted poses.
+        detections, lifted: all detections and their lifted poses.
         groups: G arrays of detection rows, each one person in one frame (one detection per view).
         points_world_m: (G, 23, 3) initial keypoints of the groups, world metres.
         fx_px, fy_px: (V,) initial focal lengths.
@@ -212,9 +190,7 @@ def bundle_adjust(
         tolerance: stop when the relative cost decrease is below this.
         camera_tolerance: also stop when the cameras have stopped moving: for ``_STILL_ITERATIONS`` iterations
             in a row no log focal, rotation increment (radians) or translation relative to the cameras' median
-            distance from the world origin changed by more than this (the points and sizes can crawl on for
-            tens of iterations at a relative cost decrease of 1e-5 while the cameras move by less than 1e-5;
-            along a flat valley the cameras still move, and it does not fire). 0 turns it off.
+            distance from the world origin changed by more than this. 0 turns it off.
         hold_views: views whose focal length and pose stay as given (e.g. views left out of the groups while the
             others are adjusted); the first view not held keeps its pose (the world frame) instead of view 0.
         lens: ``"pinhole"`` (no radial distortion), ``"k1"`` or ``"k1k2"``: the radial coefficients each view
@@ -252,6 +228,20 @@ def bundle_adjust(
     held = np.zeros(V, bool)
     held[list(hold_views)] = True
     free = free_parameters(prob, held, adjust_cameras, lens, principal_point, hold_lens_views)
+    outcome = _iterate(prob, (cams, R_init.copy(), setup.points, np.zeros(prob.G)), free, t_init, huber=huber,
+                       max_iterations=max_iterations, tolerance=tolerance, camera_tolerance=camera_tolerance)
+    return _result(setup, outcome, free, held, np.log(bounds), pp)
+
+
+def _iterate(prob: _Problem, start: tuple, free: np.ndarray, t_init: np.ndarray, *, huber: float,
+             max_iterations: int, tolerance: float, camera_tolerance: float):
+    """Levenberg-Marquardt from ``start`` (cameras (V, nc), rotations (V, 3, 3), keypoints (G, 23, 3) metres, log
+    group scales (G,)) over the ``free`` (V, nc) camera parameters; stops early once the cameras stay still
+    (``camera_tolerance``, translations relative to the median distance of ``t_init`` (V, 3) from the origin).
+
+    Raises:
+        CalibrationError: the starting cost is not finite.
+    """
     nf = _focal_count(prob)
     scale_m = max(float(np.median(np.linalg.norm(t_init, axis=1))), 1e-3)
     if not free.any():
@@ -281,13 +271,11 @@ def bundle_adjust(
         return (cams, R0, new[2], new[3]), still >= _STILL_ITERATIONS
 
     try:
-        outcome = levenberg_marquardt(linearize, trial, (cams, R_init.copy(), setup.points, np.zeros(prob.G)),
-                                      max_iterations=max_iterations, damping=_DAMPING, stop=Stop(tolerance),
-                                      accepted=accepted)
+        return levenberg_marquardt(linearize, trial, start, max_iterations=max_iterations, damping=_DAMPING,
+                                   stop=Stop(tolerance), accepted=accepted)
     except FloatingPointError:
         raise CalibrationError("bundle adjustment: the starting cost is not finite (non-finite keypoints or "
                                "poses)") from None
-    return _result(setup, outcome, free, held, np.log(bounds), pp)
 
 
 def _result(setup: BundleSetup, outcome, free: np.ndarray, held: np.ndarray, log_bounds: np.ndarray,
@@ -299,7 +287,7 @@ def _result(setup: BundleSetup, outcome, free: np.ndarray, held: np.ndarray, log
     cost, w_obs = outcome.cost, outcome.system[5]
     nf = _focal_count(prob)
     dlogf = _log_focal(prob, cams[:, :nf])[1][:, 0]
-    params_std = _camera_std(prob, cams, R0, X, log_q, free, w_obs)
+    params_std = camera_std(prob, cams, R0, X, log_q, free, w_obs)
     f_std = params_std[:, 0] * dlogf  # std of log f = std of u times d log f / d u
     lens_std = np.where(free[:, nf + 6 :], params_std[:, nf + 6 :], np.nan) if prob.lens else np.full((V, 4), np.nan)
     fx, fy, R, t = _unpack(prob, cams, R0)
@@ -343,55 +331,6 @@ def _median_per_detection(values: np.ndarray, detection: np.ndarray, count: int)
         return np.full(count, np.nan)
     medians = np.asarray(ndimage.median(values, labels=detection, index=np.arange(count)), dtype=np.float64)
     return np.where(np.bincount(detection, minlength=count) > 0, medians, np.nan)  # scipy gives garbage for none
-
-
-def _camera_std(prob: _Problem, cams, R0, X, log_q, free, w_obs) -> np.ndarray:
-    """(V, nc) std of every camera parameter that the data support (inverse Schur complement; inf where the final
-    system is singular).
-
-    Two corrections to the textbook covariance keep it honest: a lifted pose's errors are one wrong pose, strongly
-    correlated over its 23 joints, so the shape term's information is counted as one joint's per lifted pose
-    (its full weight made the focal lengths of near-planar rigs look determined to 1 % when they were 20 % off);
-    and the pixel noise is the one the residuals show (the variance factor of the inlier reprojections), not the
-    one assumed, when it is larger. Third, a person who does not move (seated, standing still) gives the same group
-    frame after frame, with the same lifter and detector errors: each group's information is divided by the
-    number of groups that repeat it (:func:`_repeats`), so that a static scene counts its people once, not once
-    per frame.
-    """
-    V, nc = prob.V, cams.shape[1]
-    share = 1.0 / np.sqrt(_repeats(X))  # (G,) whitened residuals scaled: information / repeats
-    honest = replace(prob, shape_w=prob.shape_w / np.sqrt(prob.shape_w.shape[1]) * share[prob.s_group, None],
-                     o_w=prob.o_w * share[prob.o_group])
-    Hcc, Hcp, Hpp, gc, gp, _, _ = _normal_equations(honest, cams, R0, X, log_q, free)
-    undamped = solve_damped(_arrow(Hcc, Hcp, Hpp, gc, gp), 0.0)
-    S = undamped.reduced.numpy()
-    if not (bool(undamped.blocks_factored.all()) and np.isfinite(S).all()):
-        logger.warning("bundle adjustment: singular final system, focal uncertainties unknown")
-        return np.full((V, nc), np.inf)
-    try:
-        cov = np.linalg.pinv(S)
-    except np.linalg.LinAlgError:
-        logger.warning("bundle adjustment: singular final system, focal uncertainties unknown")
-        return np.full((V, nc), np.inf)
-    r_obs = _residuals(prob, cams, R0, X, log_q)[0]
-    inlier = w_obs >= 1.0
-    variance_factor = float(np.mean(r_obs[inlier] ** 2)) if inlier.any() else 1.0
-    diag = np.diagonal(cov).reshape(V, nc)
-    return np.sqrt(np.maximum(diag, 0.0) * max(variance_factor, 1.0))
-
-
-def _repeats(X: np.ndarray, distance_m: float = _REPEAT_DISTANCE_M) -> np.ndarray:
-    """(G,) how many groups (itself included) lie within ``distance_m`` of each group: the mean distance of their
-    23 keypoints (NaN-free joints of both; (G, 23, 3) ``X``, metres)."""
-    finite = np.isfinite(X).all(-1)
-    Xf = np.where(finite[..., None], X, 0.0)
-    counts = np.ones(len(X), np.int64)
-    for g in range(len(X)):  # one row of the (G, G) distances at a time: memory linear in the groups
-        both = finite[g] & finite  # (G, 23)
-        distance = np.linalg.norm(Xf - Xf[g], axis=-1)
-        mean = (distance * both).sum(-1) / np.maximum(both.sum(-1), 1)
-        counts[g] = max(int(((mean < distance_m) & both.any(-1)).sum()), 1)
-    return counts
 
 
 def _damped_step(prob, Hcc, Hcp, Hpp, gc, gp, lam, cams, R0, X, log_q, huber):

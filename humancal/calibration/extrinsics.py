@@ -133,9 +133,7 @@ def estimate_extrinsics(
     """
     config = config or ExtrinsicsConfig()
     V = _check_inputs(detections, lifted, intrinsics)
-    if view_names is not None and len(view_names) != V:
-        raise ValueError(f"view_names must name the {V} views in order, got {len(view_names)} names")
-    view_names = None if view_names is None else [str(n) for n in view_names]
+    view_names = _checked_view_names(view_names, V)
     known = dict(known or {})
     if sorted(known) == list(range(V)):
         return known_rig_estimate(detections, lifted, [known[v] for v in range(V)], config)
@@ -157,10 +155,47 @@ def estimate_extrinsics(
                              t_init)
     bundled = bundle_stage(problem, start, groups, f, t_init, points, resected, intrinsics, rng, timings)
     timings["bundle"] = time.perf_counter() - clock - timings.get("regroup", 0.0)  # the adjustments alone
-    ba, groups = bundled.ba, bundled.groups
+    ba, groups, repair, inputs = _view_stage(problem, bundled.ba, bundled.groups, intrinsics, timings)
+    refined = _lens_and_scale(problem, ba, groups, inputs, repair, known, timings)
 
     clock = time.perf_counter()
-    adjust_any = calibration_adjuster(detections, lifted, pp, problem.bounds, f0, prior_rel, config)
+    R_final, t_final, floor, floor_problem, people = _world_frame(refined.ba, V, config, align_floor=not known)
+    timings["floor"] = time.perf_counter() - clock
+
+    cameras = cameras_of(refined.ba, R_final, t_final, refined.pp, refined.distortion, intrinsics)
+    diagnostics = _diagnostics(refined, bundled, groups, start, resected, intrinsics, (floor, floor_problem, people),
+                               timings, bool(known), config)
+    rows = np.concatenate(groups)
+    logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
+                len(np.unique(refined.detections.frame[rows])), len(np.unique(refined.detections.frame)),
+                {k: round(v, 2) for k, v in timings.items()})
+    return ExtrinsicsEstimate(cameras, diagnostics)
+
+
+def _checked_view_names(view_names: Sequence[str] | None, V: int) -> list[str] | None:
+    """The views' names as strings (None stays None).
+
+    Raises:
+        ValueError: they do not name the ``V`` views.
+    """
+    if view_names is not None and len(view_names) != V:
+        raise ValueError(f"view_names must name the {V} views in order, got {len(view_names)} names")
+    return None if view_names is None else [str(n) for n in view_names]
+
+
+def _view_stage(problem: Problem, ba, groups: list[np.ndarray], intrinsics: Sequence[IntrinsicsEstimate],
+                timings: dict[str, float]):
+    """Step 4's view check (timed as ``"views"``): every view's agreement with the others, disagreeing views
+    repaired (:mod:`.view_repair`).
+
+    Returns:
+        ``(ba, groups, repair, inputs)``: the checked rig's bundle adjustment and groups, the repair's outcome and
+        the check's :class:`~humancal.calibration.view_repair.RepairInputs`.
+    """
+    detections, lifted, pp, config = problem.detections, problem.lifted, problem.pp, problem.config
+    V = len(intrinsics)
+    clock = time.perf_counter()
+    adjust_any = calibration_adjuster(detections, lifted, pp, problem.bounds, problem.f0, problem.prior_rel, config)
     with numerical_stage("view agreement"):
         inputs = RepairInputs(detections, lifted, pp, np.array([(e.width_px, e.height_px) for e in intrinsics]),
                               problem.bounds, adjust_any, config.agreement(), config.regroup_max_frames or 150)
@@ -168,12 +203,42 @@ def estimate_extrinsics(
     require_finite(np.c_[ba.fx_px, ba.fy_px, ba.R_cam_from_world.reshape(V, -1), ba.t_cam_from_world_m],
                     "view repair")
     timings["views"] = time.perf_counter() - clock
+    return ba, groups, repair, inputs
 
+
+@dataclasses.dataclass(frozen=True)
+class _Refined:
+    """The rig after the lens step, the people's metric scale and the anchoring to the known cameras.
+
+    Attributes:
+        ba: the bundle adjustment (translations and keypoints scaled, metres).
+        lens, distortion, k1_std: the lens choice, (V, 5) OpenCV distortion and (V,) k1's std (NaN: pinhole).
+        pp: (V, 2) principal points, pixels.
+        detections: the detections in the lens's pinhole images.
+        repair: the view repair's outcome, its agreement the one of this rig.
+        scale: the people's scale factor applied (1 without ``scale_from_limbs``).
+    """
+
+    ba: object
+    lens: object
+    distortion: np.ndarray
+    k1_std: np.ndarray
+    pp: np.ndarray
+    detections: DenseDetections
+    repair: object
+    scale: float
+
+
+def _lens_and_scale(problem: Problem, ba, groups: list[np.ndarray], inputs: RepairInputs, repair,
+                    known: dict[int, Camera], timings: dict[str, float]) -> _Refined:
+    """The lens step (timed as ``"lens"``), the metric scale from the people's limbs, and with known cameras the
+    rig moved onto them (their world and, two or more, their scale)."""
+    config, lifted, f0, prior_rel = problem.config, problem.lifted, problem.f0, problem.prior_rel
     clock = time.perf_counter()
     with numerical_stage("lens"):
-        ba, lens, distortion, k1_std, pp, detections, repair = lens_step(ba, groups, detections, lifted, pp,
-                                                                         problem.bounds, f0, prior_rel, config,
-                                                                         sorted(known), inputs, repair)
+        ba, lens, distortion, k1_std, pp, detections, repair = lens_step(ba, groups, problem.detections, lifted,
+                                                                         problem.pp, problem.bounds, f0, prior_rel,
+                                                                         config, sorted(known), inputs, repair)
     timings["lens"] = time.perf_counter() - clock
     adjust_any = calibration_adjuster(detections, lifted, pp, problem.bounds, f0, prior_rel, config)  # lens's images
     scale, _ = people_scale_factor(ba.points_world_m) if config.scale_from_limbs else (1.0, 0)
@@ -182,27 +247,25 @@ def estimate_extrinsics(
     if known:  # the known cameras set the world (and, two or more, its scale)
         with numerical_stage("anchoring to the known cameras"):
             ba = anchor_to_known(ba, known, adjust_any, groups)
+    return _Refined(ba, lens, distortion, k1_std, pp, detections, repair, scale)
 
-    clock = time.perf_counter()
-    R_final, t_final, floor, floor_problem, people = _world_frame(ba, V, config, align_floor=not known)
-    timings["floor"] = time.perf_counter() - clock
 
-    cameras = cameras_of(ba, R_final, t_final, pp, distortion, intrinsics)
-    per_view = per_view_table(ba, intrinsics, start.pairs, start.f_linear, start.blind, resected, distortion, k1_std,
-                              pp, repair, config)
-    diagnostics = ExtrinsicsDiagnostics(
-        per_view, pair_table(start.pairs, start.residual_deg), group_table(detections, groups), floor,
+def _diagnostics(refined: _Refined, bundled, groups: list[np.ndarray], start, resected,
+                 intrinsics: Sequence[IntrinsicsEstimate], world: tuple, timings: dict[str, float], known: bool,
+                 config: ExtrinsicsConfig) -> ExtrinsicsDiagnostics:
+    """The :class:`ExtrinsicsDiagnostics` of the final rig: per-view, per-pair and per-group tables, the floor
+    (``world``: ``(floor, floor_problem, people)`` of :func:`_world_frame`), the regrouping and the scale."""
+    ba, (floor, floor_problem, people) = refined.ba, world
+    per_view = per_view_table(ba, intrinsics, start.pairs, start.f_linear, start.blind, resected, refined.distortion,
+                              refined.k1_std, refined.pp, refined.repair, config)
+    return ExtrinsicsDiagnostics(
+        per_view, pair_table(start.pairs, start.residual_deg), group_table(refined.detections, groups), floor,
         ba.inlier_fraction, timings, world_frame=("known_cameras" if known else "floor" if floor is not None
                                                   else "camera_0"),
         floor_problem=floor_problem, people_world_m=people,
         body_size_ratio=body_size_ratio(ba.points_world_m, bundled.lifted_cam, groups),
         mismatched_detections=bundled.dropped, regroup=bundled.regroup_status,
-        regroup_detections=bundled.regroup_counts, scale_factor=scale, lens=lens)
-    rows = np.concatenate(groups)
-    logger.info("extrinsics: %d views, %d groups over %d of %d frames, timings %s", V, len(groups),
-                len(np.unique(detections.frame[rows])), len(np.unique(detections.frame)),
-                {k: round(v, 2) for k, v in timings.items()})
-    return ExtrinsicsEstimate(cameras, diagnostics)
+        regroup_detections=bundled.regroup_counts, scale_factor=refined.scale, lens=refined.lens)
 
 
 def _world_frame(ba, V, config, align_floor: bool = True):

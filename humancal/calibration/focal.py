@@ -138,6 +138,47 @@ def _take(sigmas, rows):
     return tuple(a[rows] for a in sigmas)
 
 
+def _grid_start(vanishing_centered_h, head_c_px, ankle_c_px, h, focal_range_px):
+    """Starting focal (pixels) and ankle-plane distance (metres): the one of 200 log-spaced focal candidates whose
+    ankle centres spread least about one plane (3 m when none gives a plane)."""
+    grid = np.geomspace(*focal_range_px, 200)
+    d = _plane_heights(vanishing_centered_h, grid, grid, head_c_px, ankle_c_px, h)
+    finite = np.isfinite(d).any(1)
+    med = np.ones((len(grid), 1))
+    if finite.any():
+        med[finite] = np.nanmedian(d[finite], axis=1, keepdims=True)
+    spread = np.where(np.isfinite(d), np.minimum(((d - med) / med) ** 2, 0.04), 0.04).mean(1)
+    g = int(np.argmin(spread))
+    f0 = grid[g]
+    d0 = float(med[g, 0]) if finite[g] else 3.0
+    return f0, d0
+
+
+def _focal_uncertainty(fit, keep, frame, square_pixels, up0, basis, head_c_px, ankle_c_px, h, sig, bounds
+                       ) -> tuple[float, float]:
+    """Relative statistical std of the focal (inf at a bound of the search range) and its relative change under a
+    systematic height error of ``_HEIGHT_BIAS`` (``fit`` over the candidates ``keep``)."""
+    k = 1 if square_pixels else 2
+    # Statistical std of log f from the Gauss-Newton covariance (residuals are in units of their std; a
+    # worse fit than modelled scales it up), inflated by the number of candidates per distinct (30 frames,
+    # 100 px cell of the ankles): a person standing still repeats nearly one measurement, and a person's lean
+    # persists. Calibrated on 30 synthetic scenes: |error| / uncertainty has median 0.7 and 90 % quantile 1.8.
+    m, p = fit.fun.size, fit.x.size
+    scale2 = max(2.0 * fit.cost / max(m - p, 1), 1.0)
+    cov = np.linalg.pinv(fit.jac.T @ fit.jac) * scale2
+    key = np.column_stack([np.asarray(frame)[keep] // _CELL_FRAMES, np.round(ankle_c_px[keep] / _CELL_PX)])
+    inflation = max(keep.sum() / len(np.unique(key, axis=0)), 1.0)
+    rel_std = float(np.sqrt(max(cov[0, 0], 0.0) * inflation))
+    # Sensitivity to a systematic height error: refit with all heights scaled.
+    biased = _fit(fit.x, square_pixels, up0, basis, head_c_px[keep], ankle_c_px[keep], h[keep] * (1 + _HEIGHT_BIAS),
+                  _take(sig, keep), bounds)
+    rel_bias = float(abs(biased.x[0] - fit.x[0]))
+    at_bound = np.any(np.abs(fit.x[:k] - np.array(bounds)[:, None]) < 0.01)
+    if at_bound:  # the data pushed the focal to the end of the search range: not determined
+        rel_std = float("inf")
+    return rel_std, rel_bias
+
+
 def solve_focal(
     vanishing_centered_h: np.ndarray,
     head_c_px: np.ndarray,
@@ -173,16 +214,7 @@ def solve_focal(
     """
     h = np.asarray(height_m, dtype=np.float64)
     sig = _sigmas(head_c_px, ankle_c_px, lean_std_deg, height_rel_std)
-    grid = np.geomspace(*focal_range_px, 200)
-    d = _plane_heights(vanishing_centered_h, grid, grid, head_c_px, ankle_c_px, h)
-    finite = np.isfinite(d).any(1)
-    med = np.ones((len(grid), 1))
-    if finite.any():
-        med[finite] = np.nanmedian(d[finite], axis=1, keepdims=True)
-    spread = np.where(np.isfinite(d), np.minimum(((d - med) / med) ** 2, 0.04), 0.04).mean(1)
-    g = int(np.argmin(spread))
-    f0 = grid[g]
-    d0 = float(med[g, 0]) if finite[g] else 3.0
+    f0, d0 = _grid_start(vanishing_centered_h, head_c_px, ankle_c_px, h, focal_range_px)
     up0 = vanishing_centered_h / np.array([f0, f0, 1.0])
     up0 = orient_up(up0 / np.linalg.norm(up0), f0, f0, head_c_px, ankle_c_px)
     basis = np.linalg.svd(up0[None])[2][1:]
@@ -200,24 +232,8 @@ def solve_focal(
     fy = fx if square_pixels else float(np.exp(fit.x[1]))
     up = up0 + fit.x[k : k + 2] @ basis
     up /= np.linalg.norm(up)
-
-    # Statistical std of log f from the Gauss-Newton covariance (residuals are in units of their std; a
-    # worse fit than modelled scales it up), inflated by the number of candidates per distinct (30 frames,
-    # 100 px cell of the ankles): a person standing still repeats nearly one measurement, and a person's lean
-    # persists. Calibrated on 30 synthetic scenes: |error| / uncertainty has median 0.7 and 90 % quantile 1.8.
-    m, p = fit.fun.size, fit.x.size
-    scale2 = max(2.0 * fit.cost / max(m - p, 1), 1.0)
-    cov = np.linalg.pinv(fit.jac.T @ fit.jac) * scale2
-    key = np.column_stack([np.asarray(frame)[keep] // _CELL_FRAMES, np.round(ankle_c_px[keep] / _CELL_PX)])
-    inflation = max(keep.sum() / len(np.unique(key, axis=0)), 1.0)
-    rel_std = float(np.sqrt(max(cov[0, 0], 0.0) * inflation))
-    # Sensitivity to a systematic height error: refit with all heights scaled.
-    biased = _fit(fit.x, square_pixels, up0, basis, head_c_px[keep], ankle_c_px[keep], h[keep] * (1 + _HEIGHT_BIAS),
-                  _take(sig, keep), bounds)
-    rel_bias = float(abs(biased.x[0] - fit.x[0]))
-    at_bound = np.any(np.abs(fit.x[:k] - np.array(bounds)[:, None]) < 0.01)
-    if at_bound:  # the data pushed the focal to the end of the search range: not determined
-        rel_std = float("inf")
+    rel_std, rel_bias = _focal_uncertainty(fit, keep, frame, square_pixels, up0, basis, head_c_px, ankle_c_px, h,
+                                           sig, bounds)
     res = fit.fun.reshape(-1, 2) * np.column_stack([sig[1][keep], sig[2][keep]])
     return FocalSolution(
         fx_px=fx,

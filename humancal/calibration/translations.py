@@ -22,13 +22,13 @@ which makes the problem bilinear: it is finished by Gauss-Newton from the linear
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix, diags, hstack
 
-from humancal.calibration.types import CalibrationError, LiftedPoses
+from humancal.calibration.translation_pairs import conditioned_system, focal_stds, pair_system, reweighted_passes
+from humancal.calibration.types import LiftedPoses
 from humancal.detections import DenseDetections
 
 __all__ = [
@@ -187,182 +187,38 @@ def solve_focals_translations(
         :class:`FocalTranslationSolution`.
     """
     V = len(R_cam_from_world)
-    system = _pair_system(roots, view, rows_a, rows_b, R_cam_from_world, focal_prior_px, focal_prior_rel_std,
-                          depth_rel_std, floor_std_m)
-    ok, M, A_pairs, rhs, sigma = system.ok, system.M, system.A_pairs, system.rhs, system.sigma
-    A_extra, b_extra, col_scale = system.A_extra, system.b_extra, system.col_scale
-    weight = 1.0 / sigma
-    Ps = A_pairs @ col_scale  # scaled columns keep the normal matrix well conditioned
-    Es = A_extra @ col_scale
-    E_normal = (Es.T @ Es).toarray()
-    E_rhs = Es.T @ b_extra
-    gauge = Es[:3]
-    Pf, Pt = Ps[:, :V], Ps[:, V:]
+    system = pair_system(roots, view, rows_a, rows_b, R_cam_from_world, focal_prior_px, focal_prior_rel_std,
+                         depth_rel_std, floor_std_m)
+    M, sigma = system.M, system.sigma
+    conditioned = conditioned_system(system, V)
     scaled = bool(person_scale_std) and M > 0
     prior_s = 1.0 / person_scale_std**2 if scaled else 0.0
-    log_q = np.zeros(M)  # q = 1 / s: the residuals are in the lifted poses' units, so that (q, t) -> (q / c, c t)
-    y = None  # leaves them unchanged and only the prior fixes the overall scale (no shrinkage towards 0)
-    robust = 1.0  # residual scale relative to sigma, estimated in stage 2
-    stage1_inlier = np.ones(M, bool)
     # stage 1: s = 1, linear, Cauchy-reweighted (finds grossly wrong pairs); stage 2 (scales estimated): Gauss-Newton
     # steps from the stage-1 solution over the stage-1 inliers, Cauchy-reweighted with a robust (median) residual
     # scale: without the per-person size error the roots agree far better than ``sigma`` says
-    for estimate_scale in [False, True] if scaled else [False]:
-        if estimate_scale:
-            stage1_inlier = r_norm < inlier_sigma
-            if stage1_inlier.sum() < 2:  # nothing to refine: keep the linear solution
-                break
-            weight = np.where(stage1_inlier, 1.0 / sigma, 0.0)
-            stage1 = (y.copy(), res_m.copy(), r_norm.copy(), reduced_data.copy())
-        for it in range(iterations + 1):
-            w2 = np.repeat(weight**2, 3)
-            if not estimate_scale:
-                data_normal = (Ps.T @ diags(w2) @ Ps).toarray()
-                normal = data_normal + E_normal
-                y = _least_squares(normal, Ps.T @ (w2 * rhs.ravel()) + E_rhs, V)
-                reduced_data = data_normal
-            else:
-                # one Gauss-Newton step in (y, log q), the pair scales eliminated (each is a scalar block)
-                q_rep = np.repeat(np.exp(log_q), 3)
-                baseline = Pt @ y[V:]  # (3M,) R_b^T t_b - R_a^T t_a of each pair
-                r = Pf @ y[:V] - rhs.ravel() + q_rep * baseline
-                Jx = hstack([Pf, diags(q_rep) @ Pt]).tocsr()
-                jq = (q_rep * baseline).reshape(M, 3)  # d r / d log q_p
-                Jq = coo_matrix((jq.ravel(), (np.arange(3 * M), np.repeat(np.arange(M), 3))),
-                                shape=(3 * M, M)).tocsr()
-                data_normal = (Jx.T @ diags(w2) @ Jx).toarray()
-                H_xq = (Jx.T @ diags(w2) @ Jq).tocsr()  # (n, M), at most 8 entries per pair: kept sparse
-                h_q = (w2.reshape(M, 3) * jq**2).sum(1) + prior_s
-                g_x = Jx.T @ (w2 * r) + E_normal @ y - E_rhs
-                g_q = Jq.T @ (w2 * r) + prior_s * log_q
-                reduced_data = data_normal - (H_xq @ diags(1.0 / h_q) @ H_xq.T).toarray()
-                normal = reduced_data + E_normal
-                dy = _least_squares(normal, -(g_x - H_xq @ (g_q / h_q)), V)
-                dq = -(g_q + H_xq.T @ dy) / h_q
-                y = y + dy
-                log_q = log_q + np.clip(dq, -0.3, 0.3)
-            x = col_scale @ y
-            q_rep = np.repeat(np.exp(log_q), 3)
-            res_m = (A_pairs[:, :V] @ x[:V] - rhs.ravel() + q_rep * (A_pairs[:, V:] @ x[V:])).reshape(M, 3)
-            r_norm = np.linalg.norm(res_m, axis=1) / (np.sqrt(3.0) * sigma)  # in units of the pair's std
-            if estimate_scale:
-                # median of |r| / (sqrt(3) sigma) for 3D Gaussian residuals of std sigma: 0.888
-                robust = float(np.clip(np.median(r_norm[stage1_inlier]) / 0.888, 0.1, 1.0))
-                r_norm = r_norm / robust
-            if it < iterations:
-                weight = 1.0 / (robust * sigma * np.sqrt(1.0 + (r_norm / 2.0) ** 2))  # Cauchy
-                if estimate_scale:
-                    weight = np.where(stage1_inlier, weight, 0.0)
-        if estimate_scale and not (np.isfinite(y).all() and np.isfinite(log_q).all()):
-            # a degenerate pair set: fall back on the linear solution at s = 1
-            y, res_m, r_norm, reduced_data = stage1
-            log_q[:] = 0.0
-            x = col_scale @ y
-    residual_m = np.linalg.norm(res_m, axis=1)
-    focal = x[:V]
-    t = x[V:].reshape(V, 3)
-    f_std, f_std_data = _focal_stds(reduced_data, E_normal, gauge, col_scale, focal)
+    state = reweighted_passes(system, conditioned, 1.0 / sigma, None, np.zeros(M), iterations)
+    stage1_inlier = np.ones(M, bool)
+    if scaled:
+        stage1_inlier = state.r_norm < inlier_sigma
+        if stage1_inlier.sum() >= 2:  # else nothing to refine: keep the linear solution
+            refined = reweighted_passes(system, conditioned, np.where(stage1_inlier, 1.0 / sigma, 0.0), state.y,
+                                        state.log_q, iterations, prior_s, stage1_inlier)
+            if np.isfinite(refined.y).all() and np.isfinite(refined.log_q).all():
+                state = refined
+            else:  # a degenerate pair set: fall back on the linear solution at s = 1
+                state = replace(state, log_q=np.zeros(M), x=system.col_scale @ state.y)
+    residual_m = np.linalg.norm(state.res_m, axis=1)
+    focal = state.x[:V]
+    t = state.x[V:].reshape(V, 3)
+    f_std, f_std_data = focal_stds(state.reduced_data, conditioned.E_normal, conditioned.gauge, system.col_scale,
+                                   focal)
     residual = np.full(len(rows_a), np.nan)
-    residual[ok] = residual_m
+    residual[system.ok] = residual_m
     inlier = np.zeros(len(rows_a), bool)
-    inlier[ok] = (r_norm < inlier_sigma) & stage1_inlier
+    inlier[system.ok] = (state.r_norm < inlier_sigma) & stage1_inlier
     pair_scale = np.ones(len(rows_a))
-    pair_scale[ok] = np.exp(-log_q)
+    pair_scale[system.ok] = np.exp(-state.log_q)
     return FocalTranslationSolution(focal, t, residual, inlier, f_std, f_std_data, pair_scale)
-
-
-@dataclass(frozen=True)
-class _PairSystem:
-    """The linear system of :func:`solve_focals_translations` at ``s = 1``: unknowns ``x = (f (V), t (3V))``.
-
-    Attributes:
-        ok: (M_all,) the candidate pairs that enter (finite roots, a positive std); M: how many.
-        A_pairs: (3M, 4V) sparse pair rows ``R_a^T z_a f_a - R_b^T z_b f_b - R_a^T t_a + R_b^T t_b``; rhs: (M, 3)
-            their right-hand side (the roots' lateral parts), metres.
-        A_extra, b_extra: camera 0 at the origin (stiff rows) and the focal priors in units of their std.
-        col_scale: (4V, 4V) sparse column scaling (focal columns by a typical focal length).
-        sigma: (M,) each pair's std, metres.
-    """
-
-    ok: np.ndarray
-    M: int
-    A_pairs: object
-    rhs: np.ndarray
-    A_extra: object
-    b_extra: np.ndarray
-    col_scale: object
-    sigma: np.ndarray
-
-
-def _pair_system(roots, view, rows_a, rows_b, R_cam_from_world, focal_prior_px, focal_prior_rel_std, depth_rel_std,
-                 floor_std_m) -> _PairSystem:
-    """Assemble :class:`_PairSystem` (arguments as :func:`solve_focals_translations`)."""
-    V = len(R_cam_from_world)
-    # a pair enters only with finite roots and a positive std: one non-finite entry would make the whole normal
-    # matrix non-finite, and LAPACK's least squares then fails ("SVD did not converge") instead of ignoring it
-    with np.errstate(invalid="ignore", over="ignore"):
-        finite = np.isfinite(roots.T_cam_m).all(1) & np.isfinite(roots.zeta_m_per_px)
-        depth = 0.5 * (roots.T_cam_m[rows_a, 2] + roots.T_cam_m[rows_b, 2])
-        ok = finite[rows_a] & finite[rows_b] & np.isfinite(floor_std_m + depth_rel_std * depth) & (
-            floor_std_m + depth_rel_std * depth > 0)
-    ra, rb = rows_a[ok], rows_b[ok]
-    va, vb = view[ra], view[rb]
-    M = len(ra)
-    # unknowns: f (V), t (3V, t_0 fixed to 0 by a stiff prior row)
-    n = 4 * V
-    Rt = np.transpose(R_cam_from_world, (0, 2, 1))  # world_from_cam
-    za = Rt[va][:, :, 2] * roots.zeta_m_per_px[ra, None]  # (M, 3) d(world point)/d f_a
-    zb = Rt[vb][:, :, 2] * roots.zeta_m_per_px[rb, None]
-    lat_a = np.einsum("mij,mj->mi", Rt[va], np.c_[roots.T_cam_m[ra, :2], np.zeros(M)])
-    lat_b = np.einsum("mij,mj->mi", Rt[vb], np.c_[roots.T_cam_m[rb, :2], np.zeros(M)])
-    rhs = lat_b - lat_a
-    rows, cols, vals = [], [], []
-    eq = np.arange(3 * M).reshape(M, 3)
-    for k in range(3):
-        rows += [eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k], eq[:, k]]
-        cols += [va, vb] + [V + 3 * va + i for i in range(3)] + [V + 3 * vb + i for i in range(3)]
-        vals += [za[:, k], -zb[:, k]] + [-Rt[va][:, k, i] for i in range(3)] + [Rt[vb][:, k, i] for i in range(3)]
-    A_pairs = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * M, n)).tocsr()
-    # camera 0 at the origin (stiff rows), focal priors in units of their std
-    prior_f = np.flatnonzero(np.isfinite(focal_prior_rel_std) & np.isfinite(focal_prior_px) & (focal_prior_px > 0))
-    s = focal_prior_rel_std[prior_f] * focal_prior_px[prior_f]
-    n_extra = 3 + len(prior_f)
-    A_extra = coo_matrix(
-        (np.r_[np.full(3, 1e3), 1.0 / s], (np.arange(n_extra), np.r_[V + np.arange(3), prior_f])), shape=(n_extra, n)
-    ).tocsr()
-    b_extra = np.r_[np.zeros(3), focal_prior_px[prior_f] / s]
-    f_ref = float(np.nanmedian(focal_prior_px)) if np.isfinite(focal_prior_px).any() else 1000.0
-    col_scale = diags(np.r_[np.full(V, f_ref), np.ones(3 * V)])
-    sigma = floor_std_m + depth_rel_std * 0.5 * (roots.T_cam_m[ra, 2] + roots.T_cam_m[rb, 2])
-    return _PairSystem(ok, M, A_pairs, rhs, A_extra, b_extra, col_scale, sigma)
-
-
-def _focal_stds(reduced_data: np.ndarray, E_normal: np.ndarray, gauge, col_scale, focal: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """(V,) relative stds of the focal lengths from the (reweighted, scales eliminated) normal equations, with the
-    focal priors and without them (the data only, the gauge rows fixing camera 0)."""
-    V = len(focal)
-    cov = col_scale @ np.linalg.pinv(reduced_data + E_normal) @ col_scale
-    f_std = np.sqrt(np.maximum(np.diag(cov)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
-    cov_data = col_scale @ np.linalg.pinv(reduced_data + (gauge.T @ gauge).toarray(), rcond=1e-12) @ col_scale
-    f_std_data = np.sqrt(np.maximum(np.diag(cov_data)[:V], 0.0)) / np.maximum(np.abs(focal), 1e-9)
-    return f_std, f_std_data
-
-
-def _least_squares(normal: np.ndarray, rhs: np.ndarray, num_views: int) -> np.ndarray:
-    """Minimum-norm solution of the (n, n) normal equations of :func:`solve_focals_translations`.
-
-    A singular system (a view without pairs leaves its translation free) is fine for ``lstsq``; a non-finite one
-    is not (LAPACK's SVD does not converge): it raises :class:`CalibrationError` naming the views whose focal
-    (column ``v``) or translation (columns ``V + 3 v ..``) carries the non-finite entries.
-    """
-    bad_columns = ~(np.isfinite(normal).all(0) & np.isfinite(rhs))
-    if bad_columns.any():
-        cols = np.flatnonzero(bad_columns)
-        views = sorted({int(c) if c < num_views else int((c - num_views) // 3) for c in cols})
-        raise CalibrationError(f"linear focal and translation solve: views {views} have non-finite equations "
-                               "(their people's root positions are not finite)")
-    return np.linalg.lstsq(normal, rhs, rcond=None)[0]
 
 
 def resect_focal_translation(

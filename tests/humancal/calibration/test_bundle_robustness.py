@@ -135,7 +135,7 @@ def test_a_still_person_seen_in_many_frames_counts_once_in_the_focal_uncertainty
 
 
 def test_groups_repeat_one_another_only_when_their_keypoints_coincide():
-    from humancal.calibration.bundle import _repeats
+    from humancal.calibration.bundle_uncertainty import repeats as _repeats
 
     rng = np.random.default_rng(0)
     person = rng.normal(size=(23, 3))
