@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from humancal.calibration.types import FOOT_JOINTS, CalibrationError, ankle_midpoints, plumb_points
+from humancal.geometry.rotations import angle_between_deg
 from humancal.keypoints import JOINT_INDEX
 
 __all__ = ["FloorAlignment", "NoFloorError", "UP_SOURCES", "align_to_floor"]
@@ -118,7 +119,7 @@ def _torso_up(X: np.ndarray) -> tuple[np.ndarray, float, float]:
     mean = axes.mean(0)
     length = float(np.linalg.norm(mean))
     up = mean / max(length, 1e-12)
-    spread = np.degrees(np.arccos(np.clip(axes @ up, -1.0, 1.0)))
+    spread = angle_between_deg(axes, up)
     return up, float(np.sqrt(np.mean(spread**2)) / np.sqrt(len(axes))), length
 
 
@@ -188,7 +189,7 @@ def align_to_floor(
     # spread them (a lower resultant length) without spoiling the contact plane
     normal, spread, inliers, rms = _plane_fit(_lowest_soles(X, torso))
     normal = normal if normal @ torso > 0 else -normal
-    angle = float(np.degrees(np.arccos(np.clip(normal @ torso, -1.0, 1.0))))
+    angle = float(angle_between_deg(normal, torso))
     if spread >= min_spread_m and angle <= max_torso_plane_deg and inliers.sum() >= min_people:
         lowest = _lowest_soles(X, normal)[inliers]
         up, source = normal, "contact_plane"
@@ -221,13 +222,13 @@ def _from_standing(X, standing, R_cam0_from_world, min_spread_m) -> FloorAlignme
     lowest = _lowest_soles(X[standing], plumb)
     normal, spread, _, plane_rms = _plane_fit(lowest)
     normal = normal if normal @ plumb > 0 else -normal
-    angle = float(np.degrees(np.arccos(np.clip(normal @ plumb, -1.0, 1.0))))
+    angle = float(angle_between_deg(normal, plumb))
     if spread >= min_spread_m and angle < 15.0:
         up, source = normal, "floor_plane"
         up_std = float(np.degrees(plane_rms / (spread * np.sqrt(len(lowest)))))
     else:
         up, source = plumb, "plumb_lines"
-        spread_deg = np.degrees(np.arccos(np.clip(axes @ plumb, -1.0, 1.0)))
+        spread_deg = angle_between_deg(axes, plumb)
         up_std = float(np.sqrt(np.mean(spread_deg**2)) / np.sqrt(len(axes)))
     heights = lowest @ up
     floor = float(np.median(heights))

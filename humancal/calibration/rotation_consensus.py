@@ -18,11 +18,10 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humancal.calibration.types import CalibrationError, LiftedPoses
 from humancal.detections import DenseDetections
-from humancal.geometry.rotations import project_to_rotmat, rotation_angle_deg
+from humancal.geometry.rotations import project_to_rotmat, rotation_angle_deg, rotmat_to_quat_xyzw
 
 __all__ = ["PairRotation", "pairwise_rotations", "average_rotations", "procrustes_rotations"]
 
@@ -107,7 +106,7 @@ def _pair_hypotheses(detections, lifted, a, b, max_frames, rng):
 
 def _consensus(R: np.ndarray, weight: np.ndarray, threshold_deg: float, max_centres: int, rng) -> np.ndarray:
     """Kernel vote: the hypothesis with the largest weighted support within ``threshold_deg``, then refined."""
-    q = Rotation.from_matrix(R).as_quat()
+    q = rotmat_to_quat_xyzw(R)
     centres = np.arange(len(q)) if len(q) <= max_centres else rng.choice(len(q), max_centres, replace=False)
     half = np.radians(threshold_deg) / 2.0
     best, best_score = 0, -1.0

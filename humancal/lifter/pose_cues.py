@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from humancal.geometry.rotations import angle_between_deg
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
 
 __all__ = [
@@ -95,12 +96,6 @@ def _falling_ramp(x: np.ndarray, full: float, zero: float) -> np.ndarray:
     return 1.0 - t * t * (3.0 - 2.0 * t)
 
 
-def _angle_deg(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = (u * v).sum(-1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1))
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-
-
 UPRIGHT_RAMPS_DEG = {
     "knee_bend": (15.0, 35.0),
     "hip_bend": (15.0, 30.0),
@@ -143,8 +138,8 @@ def standing_score(joints_m: np.ndarray) -> np.ndarray:
     for side in ("left", "right"):
         thigh = joints[:, _J[f"{side}_knee"]] - joints[:, _J[f"{side}_hip"]]
         shin = joints[:, _J[f"{side}_ankle"]] - joints[:, _J[f"{side}_knee"]]
-        knee_bend.append(_angle_deg(thigh, shin))
-        hip_bend.append(_angle_deg(hips - shoulders, thigh))
+        knee_bend.append(angle_between_deg(thigh, shin))
+        hip_bend.append(angle_between_deg(hips - shoulders, thigh))
     _, axis_unit = _body_axis(joints)
     step = np.abs(((joints[:, _J["left_ankle"]] - joints[:, _J["right_ankle"]]) * axis_unit).sum(-1))
     score = _falling_ramp(np.maximum(*knee_bend), *UPRIGHT_RAMPS_DEG["knee_bend"])
@@ -182,6 +177,6 @@ def upright_score(joints_cam_m: np.ndarray) -> np.ndarray:
     joints = _check_joints(joints_cam_m, "joints_cam_m")
     axis, axis_unit = _body_axis(joints)
     side_lean = np.degrees(np.arcsin(np.clip(np.abs(axis_unit[:, 0]), 0.0, 1.0)))
-    tilt = _angle_deg(axis, np.array([0.0, -1.0, 0.0]))
+    tilt = angle_between_deg(axis, np.array([0.0, -1.0, 0.0]))
     score = standing_score(joints) * _falling_ramp(side_lean, *UPRIGHT_RAMPS_DEG["side_lean"])
     return score * _falling_ramp(tilt, *UPRIGHT_RAMPS_DEG["tilt"])

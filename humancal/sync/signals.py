@@ -26,6 +26,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from humancal.detections import DenseDetections
+from humancal.geometry.rotations import angle_between_deg
 from humancal.keypoints import JOINT_INDEX
 from humancal.sync.tracks import link_view_tracks, person_size_px
 
@@ -82,8 +83,7 @@ def pose_features(joints: np.ndarray, size: np.ndarray) -> np.ndarray:
         for a, (vertex, p, q) in enumerate(_ANGLES):
             u = joints[:, _J[p]] - joints[:, _J[vertex]]
             w = joints[:, _J[q]] - joints[:, _J[vertex]]
-            cos = (u * w).sum(-1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(w, axis=-1))
-            out[:, a] = np.arccos(np.clip(cos, -1.0, 1.0))
+            out[:, a] = np.deg2rad(angle_between_deg(u, w))
         for k, (p, q) in enumerate(_DISTANCES):
             out[:, len(_ANGLES) + k] = np.linalg.norm(joints[:, _J[p]] - joints[:, _J[q]], axis=-1) / size
     return out

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from humancal.geometry.rotations import axis_angle_to_rotmat
+from humancal.geometry.rotations import angle_between_deg, axis_angle_to_rotmat
 
 __all__ = [
     "CHANNELS",
@@ -147,7 +147,7 @@ def arm_geometry(bone_heads_m: np.ndarray, posed_bones: tuple[str, ...]) -> ArmG
     rest_elev = np.degrees(np.arctan2(upper[0], -upper[2]))
     hinge = np.cross(upper, _FORWARD)
     hinge /= np.linalg.norm(hinge)
-    rest_bend = np.degrees(np.arccos(np.clip(upper @ fore, -1.0, 1.0)))
+    rest_bend = angle_between_deg(upper, fore)
     return ArmGeometry(upper, float(rest_elev), hinge, float(rest_bend))
 
 
