@@ -36,7 +36,9 @@ __all__ = [
     "RigTensors",
     "cameras_to_table",
     "cameras_from_table",
+    "intrinsic_matrix",
     "intrinsic_matrices",
+    "look_at",
     "project_points",
     "sorted_views",
 ]
@@ -115,6 +117,42 @@ def project_points(camera: Camera, points_world_m: np.ndarray) -> tuple[np.ndarr
     px, depth = project_points_np(flat, camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m,
                                   camera.distortion)
     return px.reshape(X.shape[:-1] + (2,)), depth.reshape(X.shape[:-1])
+
+
+def intrinsic_matrix(fx_px: float, fy_px: float, cx_px: float, cy_px: float) -> np.ndarray:
+    """(3, 3) pinhole matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``, pixels."""
+    return np.array([[fx_px, 0.0, cx_px], [0.0, fy_px, cy_px], [0.0, 0.0, 1.0]], dtype=np.float64)
+
+
+def look_at(center_world_m: np.ndarray, target_world_m: np.ndarray, roll_deg: float = 0.0) -> np.ndarray:
+    """World-to-camera rotation of an OpenCV camera at ``center_world_m`` looking at ``target_world_m``.
+
+    The image x axis stays horizontal (up to ``roll_deg``, a rotation about the optical axis) and image y
+    points down (world -z) in the image.
+
+    Args:
+        center_world_m: (3,) camera centre, metres.
+        target_world_m: (3,) point on the optical axis, metres.
+        roll_deg: rotation of the image about the optical axis, degrees (clockwise in the image).
+
+    Returns:
+        (3, 3) ``R_cam_from_world`` (rows: camera x, y, z axes in world coordinates), det = +1.
+
+    Raises:
+        ValueError: the camera looks straight up or down (the horizon is undefined).
+    """
+    forward = np.asarray(target_world_m, dtype=np.float64) - np.asarray(center_world_m, dtype=np.float64)
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    if np.linalg.norm(right) < 1e-6:
+        raise ValueError("look_at: the optical axis is vertical; the image x axis is undefined")
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    R = np.stack([right, down, forward])
+    roll = np.radians(roll_deg)
+    c, s = np.cos(roll), np.sin(roll)
+    roll_about_z = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return roll_about_z @ R
 
 
 def intrinsic_matrices(fx_px, fy_px, cx_px, cy_px) -> np.ndarray:

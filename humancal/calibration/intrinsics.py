@@ -39,6 +39,7 @@ from humancal.calibration.types import (
     plumb_points,
 )
 from humancal.calibration.vanishing import VanishingPoint, fit_vertical_vanishing_point
+from humancal.camera import intrinsic_matrix
 from humancal.config import Config, at_least, in_range, positive
 from humancal.detections import DenseDetections
 
@@ -195,7 +196,7 @@ def _ankle_over_soles_m(joints_cam_m: np.ndarray, up_cam: np.ndarray) -> float:
 
 
 def _deferred(view: int, size: tuple[int, int], pp: np.ndarray, n: int, inliers: int) -> IntrinsicsEstimate:
-    K = np.array([[np.nan, 0.0, pp[0]], [0.0, np.nan, pp[1]], [0.0, 0.0, 1.0]])
+    K = intrinsic_matrix(np.nan, np.nan, pp[0], pp[1])
     nan3 = np.full(3, np.nan)
     return IntrinsicsEstimate(view, K, size[0], size[1], "no_upright", np.inf, n, inliers, np.full(2, np.nan), nan3,
                               np.nan, np.nan, np.nan, np.nan, np.nan)
@@ -248,13 +249,13 @@ def _estimate_view(
         height_rel_std=config.height_rel_std,
     )
     used = lifted.subset(keep[sel][sol.inliers])
-    K = np.array([[sol.fx_px, 0.0, pp[0]], [0.0, sol.fy_px, pp[1]], [0.0, 0.0, 1.0]])
+    K = intrinsic_matrix(sol.fx_px, sol.fy_px, pp[0], pp[1])
     used = used.in_camera_frame(np.broadcast_to(K, (len(used), 3, 3)))  # lengths are frame-free; the soles are not
     return _assemble(view, size, pp, n, vp, sol, used.joints_cam_m, config)
 
 
 def _assemble(view, size, pp, n, vp: VanishingPoint, sol, joints_cam_m, config) -> IntrinsicsEstimate:
-    K = np.array([[sol.fx_px, 0.0, pp[0]], [0.0, sol.fy_px, pp[1]], [0.0, 0.0, 1.0]])
+    K = intrinsic_matrix(sol.fx_px, sol.fy_px, pp[0], pp[1])
     up = sol.up_cam
     tilt = float(np.degrees(np.arcsin(np.clip(-up[2], -1, 1))))
     roll = float(np.degrees(np.arctan2(up[0], -up[1])))

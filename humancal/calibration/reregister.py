@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from humancal.camera import Camera
+from humancal.camera import Camera, intrinsic_matrix
 from humancal.detections import DenseDetections
 from humancal.geometry.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
@@ -88,10 +88,6 @@ class _Scorer:
         return int(near.sum()), np.where(near, best, -1)
 
 
-def _K(focal_px: float, principal_point_px) -> np.ndarray:
-    return np.array([[focal_px, 0.0, principal_point_px[0]], [0.0, focal_px, principal_point_px[1]], [0.0, 0.0, 1.0]])
-
-
 def _pnp(X: np.ndarray, x: np.ndarray, K: np.ndarray):
     """(R, t) from 3D-2D pairs by SQPnP, or None."""
     try:
@@ -130,7 +126,7 @@ def _refine(scorer: _Scorer, match: np.ndarray, f, R, t, pp, bounds):
         return f, R, t
 
     def residuals(p):
-        K = _K(np.exp(p[0]), pp)
+        K = intrinsic_matrix(np.exp(p[0]), np.exp(p[0]), *pp)
         Xc = X @ rotvec_to_rotmat(p[1:4]).T + p[4:]
         z = np.maximum(Xc[:, 2:3], 1e-6)
         return ((Xc[:, :2] / z @ K[:2, :2].T + K[:2, 2] - x) * w[:, None]).ravel()
@@ -198,7 +194,7 @@ def reregister_view(
     for i, p in _hypotheses(scorer, max_frames, np.random.default_rng(seed))[:max_hypotheses]:
         shared = np.isfinite(scorer.kp[i]).all(-1) & np.isfinite(scorer.people[i, p]).all(-1)
         for f in focals:
-            K = _K(f, pp)
+            K = intrinsic_matrix(f, f, *pp)
             pose = _pnp(scorer.people[i, p][shared], scorer.kp[i][shared], K)
             if pose is None:
                 continue
@@ -211,9 +207,9 @@ def reregister_view(
         return None
     f, R, t = best[1]
     for _ in range(3):  # refine on what it explains, match again
-        _, match = scorer.explained(_K(f, pp), R, t, match_sigma)
+        _, match = scorer.explained(intrinsic_matrix(f, f, *pp), R, t, match_sigma)
         f, R, t = _refine(scorer, match, f, R, t, pp, focal_bounds_px)
-    K = _K(f, pp)
+    K = intrinsic_matrix(f, f, *pp)
     count, match = scorer.explained(K, R, t, match_sigma)
     errors = scorer.errors(K, R, t)
     chosen = errors[np.arange(len(match)), np.maximum(match, 0)][match >= 0] * scorer.sigma[match >= 0]

@@ -29,7 +29,7 @@ from humancal.calibration.bundle import BundleResult, bundle_adjust
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.reregister import reregister_view
 from humancal.calibration.view_agreement import AgreementConfig, isolate_disagreeing_views, view_agreement
-from humancal.camera import Camera, intrinsic_matrices
+from humancal.camera import Camera, intrinsic_matrices, intrinsic_matrix
 from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
 
@@ -106,8 +106,7 @@ def cameras_of(ba: BundleResult, inputs: RepairInputs) -> list[Camera]:
     """The cameras of a bundle adjustment's result."""
     out = []
     for v in range(len(ba.fx_px)):
-        K = np.array([[ba.fx_px[v], 0.0, inputs.principal_points_px[v, 0]],
-                      [0.0, ba.fy_px[v], inputs.principal_points_px[v, 1]], [0.0, 0.0, 1.0]])
+        K = intrinsic_matrix(ba.fx_px[v], ba.fy_px[v], *inputs.principal_points_px[v])
         w, h = inputs.image_sizes_px[v]
         out.append(Camera(K, ba.R_cam_from_world[v], ba.t_cam_from_world_m[v], int(w), int(h)))
     return out

@@ -16,7 +16,7 @@ import numpy as np
 from humancal.camera import Camera
 from humancal.lifter.config import VirtualCameraRanges
 from humancal.lifter.features import R_crop_from_cam
-from humancal.synthetic.rigs import intrinsics, look_at
+from humancal.camera import intrinsic_matrix, look_at
 
 __all__ = ["focal_limits_px", "sample_virtual_cameras"]
 
@@ -94,7 +94,7 @@ def sample_virtual_cameras(
             too_big = low_px > high_px  # the body does not fit along this axis: centre it there
             low_px, high_px = np.where(too_big, size / 2, low_px), np.where(too_big, size / 2, high_px)
         pixel = low_px + where * (high_px - low_px)
-        K = intrinsics(focal, width, height)
+        K = intrinsic_matrix(focal, focal, width / 2.0, height / 2.0)
         R_aimed = look_at(centre, np.array([0.0, 0.0, pelvis_height_m]), roll_deg=float(roll))
         # Turn the camera so the aim point's ray (now the optical axis) becomes the ray through `pixel`.
         R_shift = R_crop_from_cam(pixel[None], K)[0].T

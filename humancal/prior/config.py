@@ -8,7 +8,6 @@ plain Python values (the form stored in the weights' json sidecar).
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 

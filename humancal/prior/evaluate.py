@@ -40,7 +40,7 @@ from humancal.prior.fitting import FitConfig, KeypointObservations, fit_motion
 from humancal.prior.model import MotionVAE, pose6d_to_rotmats, rotmats_to_pose6d, with_root
 from humancal.prior.windows import reconstruct_in_windows
 from humancal.retarget import RetargetedClip
-from humancal.synthetic.rigs import look_at
+from humancal.camera import look_at
 
 __all__ = [
     "DENOISE_FIT_CONFIGS",

@@ -18,7 +18,7 @@ from humancal.synthetic.motions import Motions, generate_motions
 from humancal.synthetic.noise import DetectorOutput, simulate_detections
 from humancal.synthetic.people import People, sample_people
 from humancal.synthetic.presets import PRESETS, preset, preset_names
-from humancal.synthetic.rigs import look_at, make_rig
+from humancal.synthetic.rigs import make_rig
 from humancal.synthetic.scene import SyntheticScene, generate_scene
 
 __all__ = [
@@ -38,7 +38,6 @@ __all__ = [
     "PRESETS",
     "preset",
     "preset_names",
-    "look_at",
     "make_rig",
     "SyntheticScene",
     "generate_scene",

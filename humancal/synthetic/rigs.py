@@ -15,15 +15,13 @@ import logging
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import Camera, intrinsic_matrix, look_at
 from humancal.settings import dataset_dir
 from humancal.synthetic.config import SceneConfig
 from humancal.synthetic.h36m_cameras import axes_meeting_point, load_h36m_cameras
 from humancal.synthetic.lenses import LensDraws, distorted_radius, draw_lenses, fold_radius, undistorted_radius
 
 __all__ = [
-    "look_at",
-    "intrinsics",
     "make_rig",
     "ring_rig",
     "dome_rig",
@@ -42,42 +40,6 @@ _BODY_RADIUS_M = 0.5
 """Added to the area's half-diagonal when fitting it into a field of view (arms and bodies at the edge)."""
 _FIT_HEIGHT_M = 2.0
 """Height of the box fitted into the image by cameras with a drawn tilt (standing heads and raised hands)."""
-
-
-def look_at(center_world_m: np.ndarray, target_world_m: np.ndarray, roll_deg: float = 0.0) -> np.ndarray:
-    """World-to-camera rotation of an OpenCV camera at ``center_world_m`` looking at ``target_world_m``.
-
-    The image x axis stays horizontal (up to ``roll_deg``, a rotation about the optical axis) and image y
-    points down (world -z) in the image.
-
-    Args:
-        center_world_m: (3,) camera centre, metres.
-        target_world_m: (3,) point on the optical axis, metres.
-        roll_deg: rotation of the image about the optical axis, degrees (clockwise in the image).
-
-    Returns:
-        (3, 3) ``R_cam_from_world`` (rows: camera x, y, z axes in world coordinates), det = +1.
-
-    Raises:
-        ValueError: the camera looks straight up or down (the horizon is undefined).
-    """
-    forward = np.asarray(target_world_m, dtype=np.float64) - np.asarray(center_world_m, dtype=np.float64)
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, [0.0, 0.0, 1.0])
-    if np.linalg.norm(right) < 1e-6:
-        raise ValueError("look_at: the optical axis is vertical; the image x axis is undefined")
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    R = np.stack([right, down, forward])
-    roll = np.radians(roll_deg)
-    c, s = np.cos(roll), np.sin(roll)
-    roll_about_z = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return roll_about_z @ R
-
-
-def intrinsics(focal_px: float, width_px: int, height_px: int) -> np.ndarray:
-    """(3, 3) pinhole K with square pixels and the principal point at the image centre, pixels."""
-    return np.array([[focal_px, 0.0, width_px / 2.0], [0.0, focal_px, height_px / 2.0], [0.0, 0.0, 1.0]])
 
 
 def monotonic_radius(k1: float, k2: float = 0.0) -> float:
@@ -298,7 +260,7 @@ def _with_lens(K: np.ndarray, lenses: LensDraws, v: int) -> tuple[np.ndarray, ..
 def _camera(focal_px: float, lenses: LensDraws, v: int, center: np.ndarray, target: np.ndarray, roll_deg: float,
             width: int, height: int) -> Camera:
     R = look_at(center, target, roll_deg=roll_deg)
-    K, distortion = _with_lens(intrinsics(focal_px, width, height), lenses, v)
+    K, distortion = _with_lens(intrinsic_matrix(focal_px, focal_px, width / 2.0, height / 2.0), lenses, v)
     camera = Camera.from_center(K, R, center, width, height)
     return Camera(camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m, width, height, distortion)
 
@@ -327,7 +289,7 @@ def h36m_rig(config: SceneConfig) -> list[Camera]:
     cameras = []
     for (camera_id, K_raw, R_v, _), center in zip(cameras_raw[: config.num_views], centers):
         focal = 0.5 * (K_raw[0, 0] + K_raw[1, 1])
-        cameras.append(Camera.from_center(intrinsics(focal, width, height), R_v, center - shift, width, height))
+        cameras.append(Camera.from_center(intrinsic_matrix(focal, focal, width / 2.0, height / 2.0), R_v, center - shift, width, height))
         logger.debug("h36m camera %s: focal %.1f px, centre %s m", camera_id, focal, np.round(center - shift, 3))
     return cameras
 

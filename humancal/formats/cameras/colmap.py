@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import Camera, intrinsic_matrix
 from humancal.formats._io import atomic_write_texts, read_text
 from humancal.formats.cameras._checks import camera_names, check_writable, make_camera
 from humancal.formats.errors import FormatError
@@ -203,7 +203,7 @@ def _read_cameras_txt(path: Path, shift: float) -> dict[int, tuple[np.ndarray, n
         fx, fy = p.get("fx", p.get("f")), p.get("fy", p.get("f"))
         if not (fx > 0 and fy > 0):
             raise FormatError(path, f"{field} focal", "positive focal lengths", [fx, fy])
-        K = np.array([[fx, 0.0, p["cx"] - shift], [0.0, fy, p["cy"] - shift], [0.0, 0.0, 1.0]])
+        K = intrinsic_matrix(fx, fy, p["cx"] - shift, p["cy"] - shift)
         dist = np.array([p.get("k1", 0.0), p.get("k2", 0.0), p.get("p1", 0.0), p.get("p2", 0.0), p.get("k3", 0.0)])
         if camera_id in out:
             raise FormatError(path, f"{field} CAMERA_ID", "distinct camera ids", camera_id)

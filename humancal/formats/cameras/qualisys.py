@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import Camera, intrinsic_matrix
 from humancal.formats.cameras._checks import make_camera
 from humancal.formats.errors import FormatError, missing_field
 
@@ -166,7 +166,7 @@ def _camera(camera: ET.Element, serial: str, path: Path) -> Camera:
     cy = (intrinsic["centerPointV"] / SUBPIXELS_PER_PIXEL - fov["top"] + 0.5) * s - 0.5
     if not (fx > 0 and fy > 0):
         raise FormatError(path, f"{field}.intrinsic.focalLengthU", "positive focal lengths", (fx, fy))
-    K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    K = intrinsic_matrix(fx, fy, cx, cy)
     dist = np.array([distortion[k] for k in _DISTORTION]) / SUBPIXELS_PER_PIXEL
     Q = np.array([[transform[f"r{i}{j}"] for j in (1, 2, 3)] for i in (1, 2, 3)])
     R = OPENCV_FROM_QUALISYS_CAMERA @ Q

@@ -8,7 +8,7 @@ import pytest
 from humancal.association.cluster_triangulation import _linear_points, normal_equations
 from humancal.association.track_smoothing import SmoothingConfig, smooth_tracks
 from humancal.camera import Camera
-from humancal.synthetic.rigs import look_at
+from humancal.camera import look_at
 
 FPS = 30.0
 

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from evaluation.oracle import lift_ground_truth, upright_scores
-from humancal.calibration import CalibrationError, align_rig, align_to_floor, plot_rigs
+from humancal.calibration import align_rig, align_to_floor, plot_rigs
 from humancal.calibration.floor import NoFloorError
 from humancal.synthetic.activities import ACTIVITIES
 from humancal.calibration.bundle import bundle_adjust

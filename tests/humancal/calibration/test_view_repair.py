@@ -1,7 +1,6 @@
 """A capture where the calibration's first rig is wrong (seated people, 20 frames, 5 views): the views that disagree
 with the others are found, placed again and the rig ends right; with the repair off, the same views are named."""
 
-import numpy as np
 import pytest
 
 from evaluation.camera_metrics import camera_errors

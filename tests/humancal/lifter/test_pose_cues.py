@@ -8,7 +8,8 @@ import torch
 
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import height_from_pose_m, upright_score
-from humancal.synthetic import look_at, sample_people
+from humancal.camera import look_at
+from humancal.synthetic import sample_people
 from humancal.synthetic.poses import CHANNEL_INDEX, CHANNELS, arm_geometry, channels_to_rotmats
 
 HEIGHT_TOLERANCE_M = 0.025

@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from humancal.camera import Camera
+from humancal.camera import Camera, look_at
 from humancal.keypoints import NUM_JOINTS
-from humancal.synthetic import DetectorNoise, SceneConfig, generate_scene, look_at, preset, simulate_detections
+from humancal.synthetic import DetectorNoise, SceneConfig, generate_scene, preset, simulate_detections
 from humancal.synthetic.clocks import to_reference_frames
 from humancal.synthetic.lenses import distorted_radius, fold_radius, undistorted_radius
 

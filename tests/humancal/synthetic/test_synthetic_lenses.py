@@ -6,9 +6,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from humancal.camera import Camera, project_points
+from humancal.camera import Camera, look_at, project_points
 from humancal.keypoints import NUM_JOINTS
-from humancal.synthetic import DetectorNoise, generate_scene, look_at, preset, simulate_detections
+from humancal.synthetic import DetectorNoise, generate_scene, preset, simulate_detections
 
 
 def test_portrait_detections_are_inside_the_image_and_everyone_is_seen(body_model):

@@ -8,7 +8,7 @@ import pytest
 from humancal.camera import Camera, project_points
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
 from humancal.synthetic.occlusion import CAPSULES, occlusion_degree
-from humancal.synthetic.rigs import intrinsics, look_at
+from humancal.camera import intrinsic_matrix, look_at
 
 # A standing person facing -y (anny's reference keypoints rounded, feet on the floor), metres.
 _STANDING = np.array(
@@ -25,7 +25,7 @@ _STANDING = np.array(
 
 def _camera_at(center, target=(0.0, 0.0, 1.0)):
     R = look_at(np.asarray(center, float), np.asarray(target, float))
-    return Camera.from_center(intrinsics(1200.0, 1920, 1080), R, np.asarray(center, float), 1920, 1080)
+    return Camera.from_center(intrinsic_matrix(1200.0, 1200.0, 1920 / 2.0, 1080 / 2.0), R, np.asarray(center, float), 1920, 1080)
 
 
 def _reference(pixels, depth, focal):

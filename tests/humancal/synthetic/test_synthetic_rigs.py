@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humancal.camera import project_points
+from humancal.camera import look_at, project_points
 from humancal.settings import DataRootError, data_root
-from humancal.synthetic import SceneConfig, look_at, make_rig
+from humancal.synthetic import SceneConfig, make_rig
 
 
 def _check_rig(cameras, config):
