@@ -20,8 +20,9 @@ and a point 1 m up 200 px higher in the image:
 from __future__ import annotations
 
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
+from typing import overload
 
 import numpy as np
 import pandas as pd
@@ -248,6 +249,38 @@ class CameraRig:
     def __len__(self) -> int:
         return int(self.K.shape[0])
 
+    @overload
+    def __getitem__(self, view: int) -> Camera: ...
+
+    @overload
+    def __getitem__(self, views: slice) -> CameraRig: ...
+
+    def __getitem__(self, index):
+        """View ``v``'s :class:`Camera`, or a sub-rig for a slice (its views numbered from 0)."""
+        if isinstance(index, slice):
+            return CameraRig.from_cameras(self.cameras[index])
+        return self.cameras[index]
+
+    def __iter__(self) -> Iterator[Camera]:
+        return iter(self.cameras)
+
+    @property
+    def cameras(self) -> tuple[Camera, ...]:
+        """One :class:`Camera` per view, in view order (built once; a rig is a sequence of these)."""
+        cached = self.__dict__.get("_cameras")
+        if cached is None:
+            cached = tuple(
+                Camera(self.K[v], self.R_cam_from_world[v], self.t_cam_from_world_m[v], int(self.image_size_px[v, 0]),
+                       int(self.image_size_px[v, 1]), self.distortion[v])
+                for v in range(len(self)))
+            object.__setattr__(self, "_cameras", cached)
+        return cached
+
+    @classmethod
+    def of(cls, cameras: CameraRig | Sequence[Camera]) -> CameraRig:
+        """``cameras`` as a rig (a rig is returned as it is; a sequence of cameras is stacked, index = view)."""
+        return cameras if isinstance(cameras, CameraRig) else cls.from_cameras(cameras)
+
     @property
     def centers_world_m(self) -> np.ndarray:
         """(V, 3) camera centres in the world frame, metres: ``-R^T t``."""
@@ -268,12 +301,8 @@ class CameraRig:
         )
 
     def to_cameras(self) -> list[Camera]:
-        """One :class:`Camera` per view, in view order."""
-        return [
-            Camera(self.K[v], self.R_cam_from_world[v], self.t_cam_from_world_m[v], int(self.image_size_px[v, 0]),
-                   int(self.image_size_px[v, 1]), self.distortion[v])
-            for v in range(len(self))
-        ]
+        """One :class:`Camera` per view, in view order, as a list."""
+        return list(self.cameras)
 
     @classmethod
     def from_table(cls, table: pd.DataFrame) -> CameraRig:

@@ -26,6 +26,24 @@ def _same(a: Camera, b: Camera):
     assert (a.width_px, a.height_px) == (b.width_px, b.height_px)
 
 
+def test_a_rig_is_a_sequence_of_its_cameras():
+    cams = _cameras(4)
+    rig = CameraRig.from_cameras(cams)
+    for a, b in zip(rig, cams, strict=True):
+        _same(a, b)
+    _same(rig[2], cams[2])
+    _same(rig[-1], cams[3])
+    assert rig[2] is rig[2]  # built once
+    tail = rig[1:3]
+    assert isinstance(tail, CameraRig) and len(tail) == 2
+    _same(tail[0], cams[1])
+    assert CameraRig.of(rig) is rig
+    np.testing.assert_array_equal(CameraRig.of(cams).K, rig.K)
+    with pytest.raises(IndexError):
+        rig[4]
+    assert not CameraRig.from_cameras([]) and list(CameraRig.from_cameras([])) == []
+
+
 def test_round_trips_cameras_table_and_tensors():
     cams = _cameras()
     rig = CameraRig.from_cameras(cams)
