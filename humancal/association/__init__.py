@@ -10,7 +10,6 @@ from humancal.association.affinity import (
 )
 from humancal.association.cycle_matching import (
     FrameMatching,
-    MatchingConfig,
     WarmStart,
     carry_over,
     clusters_to_matrix,
@@ -21,6 +20,7 @@ from humancal.association.cycle_matching import (
     solve_relaxation_cvxpy,
 )
 from humancal.association.detection_geometry import DetectionGeometry, detection_geometry
+from humancal.association.matching_config import MatchingConfig
 from humancal.association.track_smoothing import SmoothingConfig, smooth_tracks
 from humancal.association.tracking_config import TrackingConfig
 from humancal.association.tracking import (

@@ -73,7 +73,7 @@ class AffinityConfig(Config):
         position_scale_m: the same for the distance of the placed hip midpoints, metres.
         depth_scale_range: (low, high) common factor by which the two placed hip midpoints may slide along
             their rays before their distance is taken (the lifter cannot see a person's absolute size, so its
-            depths share one error per person: 12 % too near on the synthetic test scene).
+            depths share one error per person).
         temporal_scale_m: like ``ray_distance_scale_m`` for a track's previous joints to a detection's rays
             (larger: people move between frames), metres.
         min_common_joints: a pair (or a detection and a track) sharing fewer joints has affinity 0.

@@ -12,7 +12,8 @@ section III-C, ``docs/association.md``).
    Then the clusters are repaired: two clusters of a frame from different views that are one person split in
    two (their skeletons together, the larger one reprojecting onto the smaller one's detections) are merged
    (``merge_distance_m``), and a detection no cluster took joins the one cluster it fits
-   (``complete_clusters``); what changed is triangulated again.
+   (``complete_clusters``); what changed is triangulated again
+   (:func:`~humancal.association.matched_clusters.triangulate_matchings`).
 4. **Tracking**, frame by frame (:mod:`humancal.association.tracks`): clusters are assigned to tracks by the
    Hungarian method (``scipy.optimize.linear_sum_assignment``) on the median 3D joint distance to each track's
    predicted skeleton, gated by ``assign_distance_m``. A track that is not seen waits ``reid_window_s`` seconds; a
@@ -33,20 +34,18 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 
 from humancal.association.affinity import detection_track_affinity, pair_affinities
-from humancal.association.cluster_repair import complete_clusters, merge_split_clusters
-from humancal.association.cluster_triangulation import (
-    cluster_observations,
-    triangulate_clusters,
-    undistorted_keypoints_px,
-)
+from humancal.association.cluster_triangulation import cluster_observations
 from humancal.association.cycle_matching import match_frames
+from humancal.association.matched_clusters import MatchedClusters, TriangulationInputs, triangulate_matchings
 from humancal.association.track_smoothing import smooth_tracks
 from humancal.association.tracking_config import TrackingConfig
 from humancal.association.tracks import build_tracks, keep_tracks
@@ -110,7 +109,7 @@ class AssociationResult:
     warnings: tuple[str, ...] = ()
 
 
-# ------------------------------------------------------------------------------------------------------- clusters
+# --------------------------------------------------------------------------------------------------------- input
 
 
 def _check_inputs(detections: DenseDetections, lifted: LiftedPoses | None, rig: CameraRig) -> list[str]:
@@ -133,20 +132,6 @@ def _check_inputs(detections: DenseDetections, lifted: LiftedPoses | None, rig: 
                          "needs detections in at least 2 views")
     missing = sorted(set(range(len(rig))) - set(seen.tolist()))
     return [f"view {v} has no detections" for v in missing]
-
-
-def _global_clusters(matchings, frame_start: np.ndarray, D: int) -> tuple[np.ndarray, np.ndarray]:
-    """(D,) global cluster of every (sorted) detection or -1, and (C,) frame index of every cluster."""
-    cluster = np.full(D, -1, np.int64)
-    frame_of = []
-    offset = 0
-    for i, m in enumerate(matchings):
-        c = m.cluster
-        cluster[frame_start[i]:frame_start[i + 1]] = np.where(c >= 0, c + offset, -1)
-        k = int(c.max()) + 1 if len(c) and c.max() >= 0 else 0
-        frame_of.extend([i] * k)
-        offset += k
-    return cluster, np.asarray(frame_of, np.int64)
 
 
 # --------------------------------------------------------------------------------------------------------- entry
@@ -176,90 +161,87 @@ def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: Came
     start = time.perf_counter()
     warnings = _check_inputs(detections, lifted, rig)
     seconds: dict[str, float] = {}
-    frame_in = np.asarray(detections.frame, dtype=np.int64)
-    order = np.argsort(frame_in, kind="stable")
-    dense = DenseDetections(frame_in[order], np.asarray(detections.view, np.int64)[order],
+    order, dense, lifted_sorted = _sorted_by_frame(detections, lifted)
+    with _timed(seconds, "affinity"):
+        pairs = pair_affinities(dense, lifted_sorted, rig, config.affinity)
+        matrices = pairs.matrices()
+        views = [dense.view[pairs.frame_start[i]:pairs.frame_start[i + 1]] for i in range(len(pairs.frames))]
+    with _timed(seconds, "matching"):
+        matchings = match_frames(views, matrices, config.matching_config)
+    with _timed(seconds, "triangulation"):
+        inputs = TriangulationInputs.of(dense, rig)
+        clusters = triangulate_matchings(matchings, pairs.frame_start, pairs.frames, inputs, config)
+    with _timed(seconds, "tracking"):
+        person = _track(clusters, config, warnings)
+    seconds["temporal"] = 0.0
+    if config.temporal and config.affinity.uses_pose and lifted is not None:
+        with _timed(seconds, "temporal"):
+            changed = _rematch_with_tracks(pairs, matrices, views, matchings, clusters.frame, person,
+                                           clusters.joints_world_m, config)
+        if changed:
+            with _timed(seconds, "triangulation"):
+                clusters = triangulate_matchings(matchings, pairs.frame_start, pairs.frames, inputs, config)
+            with _timed(seconds, "tracking"):
+                person = _track(clusters, config, warnings)
+    seconds["smoothing"] = 0.0
+    joints = clusters.joints_world_m
+    if config.smoothing.enabled and (person >= 0).any():
+        with _timed(seconds, "smoothing"):
+            joints = _smooth(clusters, person, inputs, config)
+    person_id, num_people, rows = _people(clusters, person, order, config, warnings)
+    seconds["total"] = time.perf_counter() - start
+    return AssociationResult(
+        frame=np.asarray(detections.frame, dtype=np.int64).copy(), view=np.asarray(detections.view, np.int64).copy(),
+        det_id=np.asarray(detections.det_id, np.int64).copy(), person_id=person_id,
+        skeleton_frame=clusters.frame[rows], skeleton_person=person[rows], joints_world_m=joints[rows],
+        joint_views=clusters.joint_views[rows], num_views=clusters.num_views[rows], num_people=num_people,
+        stage_seconds=seconds, warnings=tuple(warnings))
+
+
+@contextmanager
+def _timed(seconds: dict[str, float], stage: str) -> Iterator[None]:
+    """Add the seconds the block takes to ``seconds[stage]``."""
+    t0 = time.perf_counter()
+    yield
+    seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - t0
+
+
+def _sorted_by_frame(detections: DenseDetections, lifted: LiftedPoses | None
+                     ) -> tuple[np.ndarray, DenseDetections, LiftedPoses | None]:
+    """The (D,) stable order of the detections by frame, and the detections and lifted poses in that order."""
+    frame = np.asarray(detections.frame, dtype=np.int64)
+    order = np.argsort(frame, kind="stable")
+    dense = DenseDetections(frame[order], np.asarray(detections.view, np.int64)[order],
                             np.asarray(detections.det_id, np.int64)[order],
                             np.asarray(detections.keypoints_px, np.float64)[order],
                             np.asarray(detections.scores, np.float64)[order])
-    lifted_sorted = None if lifted is None else lifted.subset(order)
-    matching = config.matching_config
+    return order, dense, None if lifted is None else lifted.subset(order)
 
-    t0 = time.perf_counter()
-    pairs = pair_affinities(dense, lifted_sorted, rig, config.affinity)
-    matrices = pairs.matrices()
-    views = [dense.view[pairs.frame_start[i]:pairs.frame_start[i + 1]] for i in range(len(pairs.frames))]
-    seconds["affinity"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    matchings = match_frames(views, matrices, matching)
-    seconds["matching"] = time.perf_counter() - t0
+def _track(clusters: MatchedClusters, config: TrackingConfig, warnings: list[str]) -> np.ndarray:
+    """(C,) person of every cluster (0..P-1 by first appearance; -1: rejected); ``warnings`` extended."""
+    track_of = build_tracks(clusters.frame, clusters.joints_world_m, clusters.num_views, config)
+    return keep_tracks(track_of, clusters.frame, clusters.joints_world_m, config, warnings)
 
-    t0 = time.perf_counter()
-    cameras = [replace(c, distortion=np.zeros(5)) for c in rig.to_cameras()]
-    keypoints = undistorted_keypoints_px(dense, rig)
-    scores = np.where(np.isfinite(keypoints).all(-1), dense.scores, 0.0)
 
-    def triangulated(matchings):
-        """Triangulate every cluster; merge the clusters that are one person split in two and give the lone
-        detections to the cluster they fit (``matchings`` updated in place), triangulating again after each
-        step that changed something."""
-        def solve():
-            cluster, cluster_frame = _global_clusters(matchings, pairs.frame_start, len(dense))
-            joints, used = triangulate_clusters(cluster, len(cluster_frame), dense.view, keypoints, scores,
-                                                cameras, config.outlier_threshold_px)
-            return cluster, cluster_frame, joints, used
+def _smooth(clusters: MatchedClusters, person: np.ndarray, inputs: TriangulationInputs,
+            config: TrackingConfig) -> np.ndarray:
+    """(C, 23, 3) the clusters' joints refined over each person's track (world metres)."""
+    points, weights = cluster_observations(clusters.cluster, len(clusters.frame), inputs.view, inputs.keypoints_px,
+                                           inputs.scores, len(inputs.cameras))
+    joints, _ = smooth_tracks(clusters.frame, person, clusters.joints_world_m, points, weights, inputs.cameras,
+                              config.fps, config.smoothing)
+    return joints
 
-        cluster, cluster_frame, joints, used = solve()
-        if config.merge_distance_m > 0 and merge_split_clusters(
-                matchings, pairs.frame_start, cluster, cluster_frame, joints, dense.view, keypoints, scores, cameras,
-                distance_m=config.merge_distance_m, threshold_px=config.outlier_threshold_px):
-            cluster, cluster_frame, joints, used = solve()  # clusters renumbered
-        if config.complete_clusters:
-            grown = complete_clusters(matchings, pairs.frame_start, cluster, cluster_frame, joints, dense.view,
-                                      keypoints, scores, cameras, threshold_px=config.outlier_threshold_px)
-            if len(grown):  # the numbering is kept: only the clusters that grew are triangulated again
-                cluster, _ = _global_clusters(matchings, pairs.frame_start, len(dense))
-                rows = np.flatnonzero(np.isin(cluster, grown))
-                sub = np.searchsorted(grown, cluster[rows])
-                joints[grown], used[grown] = triangulate_clusters(
-                    sub, len(grown), dense.view[rows], keypoints[rows], scores[rows], cameras,
-                    config.outlier_threshold_px)
-        views_per_cluster = np.bincount(cluster[cluster >= 0], minlength=len(cluster_frame))
-        return cluster, pairs.frames[cluster_frame], joints, used, views_per_cluster
 
-    cluster, sk_frame, joints, used, sk_views = triangulated(matchings)
-    seconds["triangulation"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    person = keep_tracks(build_tracks(sk_frame, joints, sk_views, config), sk_frame, joints, config, warnings)
-    seconds["tracking"] = time.perf_counter() - t0
-
-    seconds["temporal"] = 0.0
-    if config.temporal and config.affinity.uses_pose and lifted is not None:
-        t0 = time.perf_counter()
-        changed = _rematch_with_tracks(pairs, matrices, views, matchings, sk_frame, person, joints, config)
-        seconds["temporal"] = time.perf_counter() - t0
-        if changed:
-            t0 = time.perf_counter()
-            cluster, sk_frame, joints, used, sk_views = triangulated(matchings)
-            seconds["triangulation"] += time.perf_counter() - t0
-            t0 = time.perf_counter()
-            person = keep_tracks(build_tracks(sk_frame, joints, sk_views, config), sk_frame, joints, config, warnings)
-            seconds["tracking"] += time.perf_counter() - t0
-
-    seconds["smoothing"] = 0.0
-    if config.smoothing.enabled and (person >= 0).any():
-        t0 = time.perf_counter()
-        points, weights = cluster_observations(cluster, len(sk_frame), dense.view, keypoints, scores, len(cameras))
-        joints, filled = smooth_tracks(sk_frame, person, joints, points, weights, cameras, config.fps,
-                                       config.smoothing)
-        seconds["smoothing"] = time.perf_counter() - t0
-
+def _people(clusters: MatchedClusters, person: np.ndarray, order: np.ndarray, config: TrackingConfig,
+            warnings: list[str]) -> tuple[np.ndarray, int, np.ndarray]:
+    """(D,) person of every detection in the input's row order, the number of people, and the rows of the kept
+    skeletons sorted by frame, then person; the warnings about the people found are added, and all are logged."""
+    cluster = clusters.cluster
     keep = person >= 0
-    det_person_sorted = np.where(cluster >= 0, person[np.maximum(cluster, 0)] if len(person) else -1, -1)
-    det_person = np.empty(len(dense), np.int64)
-    det_person[order] = det_person_sorted
+    det_person = np.empty(len(cluster), np.int64)
+    det_person[order] = np.where(cluster >= 0, person[np.maximum(cluster, 0)] if len(person) else -1, -1)
     num_people = int(person.max()) + 1 if keep.any() else 0
     if num_people == 0:
         warnings.append("no person found: every detection is rejected (false positives, or no person seen by "
@@ -269,14 +251,7 @@ def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: Came
     for w in warnings:
         logger.warning("associate: %s", w)
     rows = np.flatnonzero(keep)
-    rows = rows[np.lexsort((person[rows], sk_frame[rows]))]
-    seconds["total"] = time.perf_counter() - start
-    return AssociationResult(
-        frame=frame_in.copy(), view=np.asarray(detections.view, np.int64).copy(),
-        det_id=np.asarray(detections.det_id, np.int64).copy(), person_id=det_person,
-        skeleton_frame=sk_frame[rows], skeleton_person=person[rows], joints_world_m=joints[rows],
-        joint_views=used[rows], num_views=sk_views[rows], num_people=num_people, stage_seconds=seconds,
-        warnings=tuple(warnings))
+    return det_person, num_people, rows[np.lexsort((person[rows], clusters.frame[rows]))]
 
 
 def _rematch_with_tracks(pairs, matrices, views, matchings, sk_frame, person, joints, config) -> int:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from humancal.association.affinity import AffinityConfig
-from humancal.association.cycle_matching import MatchingConfig
+from humancal.association.matching_config import MatchingConfig
 from humancal.association.track_smoothing import SmoothingConfig
 from humancal.config import Config, at_least, in_range, positive
 

@@ -96,6 +96,65 @@ def build_reduction(model, regression_weights: Tensor) -> KeypointReduction:
         ValueError: a posed bone name is not in the rig, or the rig's structure differs from what the reduction
             assumes (parents before children, a single root).
     """
+    rig = _articulated_rig(model)
+    dtype, device = regression_weights.dtype, regression_weights.device
+    # Work in float64: the reduced tensors are sums over thousands of vertices.
+    W = regression_weights.to(torch.float64)
+    skin = _skinning_matrix(model, W.shape[1], len(rig.parents), device)
+    affine_all = W @ skin  # (K, 104)
+    weighted = torch.nonzero((affine_all != 0).any(dim=0)).flatten()
+    group = torch.tensor([_nearest_in(int(j), rig.members, rig.parents) for j in weighted], device=device)
+    linear = _linear_terms(model, W, skin, weighted)
+    affine = _affine_terms(affine_all[:, weighted], group, rig)
+    logger.debug(
+        "keypoint reduction: %d articulated bones, %d weighted anny bones, %d blendshapes",
+        len(rig.articulated), len(weighted), linear.basis.shape[0],
+    )
+    return KeypointReduction(
+        articulated_bones=torch.tensor(rig.articulated, device=device),
+        pose_index=torch.tensor(rig.pose_index, device=device),
+        translation_owner=torch.tensor(rig.translation_owner, device=device),
+        is_group_head=torch.tensor(rig.is_group_head, device=device),
+        joint_bones=torch.tensor([rig.articulated[e] for e in rig.group_heads], device=device),
+        posed_parents=rig.posed_parents,
+        chain=chain_levels(rig.posed_parents).to(device),
+        weighted_bones=weighted,
+        weighted_group=group,
+        affine_kj=affine.kj.to(dtype),
+        affine_ke=affine.ke.to(dtype),
+        affine_kb=affine.kb.to(dtype),
+        linear_template=linear.template.to(dtype),
+        linear_basis=linear.basis.to(dtype),
+    )
+
+
+@dataclass(frozen=True)
+class _ArticulatedRig:
+    """anny's articulated bones grouped by posed bone (``E`` articulated bones, ``B`` posed bones), as index lists.
+
+    Attributes:
+        parents: parent of each anny bone (-1 for the root).
+        articulated: (E,) anny bone index of each articulated bone, posed-bone groups in ``POSED_BONE_SPEC`` order.
+        pose_index: (E,) the posed bone whose rotation each articulated bone takes.
+        group_heads: (B,) position in ``articulated`` of each posed bone's first anny bone.
+        members: position in ``articulated`` of each articulated anny bone.
+        posed_parents: (B,) posed-bone parent of each posed bone (-1 for the root).
+        is_group_head: (E,) the articulated bone is the first of its posed bone's group.
+        translation_owner: (E,) the posed bone whose head and rotation place each articulated bone's head.
+    """
+
+    parents: list[int]
+    articulated: list[int]
+    pose_index: list[int]
+    group_heads: list[int]
+    members: dict[int, int]
+    posed_parents: tuple[int, ...]
+    is_group_head: list[bool]
+    translation_owner: list[int]
+
+
+def _articulated_rig(model) -> _ArticulatedRig:
+    """Group anny's articulated bones by posed bone and check the rig has the structure the reduction folds."""
     labels = list(model.bone_labels)
     parents = [int(p) for p in model.bone_parents]
     index = {name: i for i, name in enumerate(labels)}
@@ -105,7 +164,7 @@ def build_reduction(model, regression_weights: Tensor) -> KeypointReduction:
 
     articulated: list[int] = []
     pose_index: list[int] = []
-    group_heads: list[int] = []  # position in `articulated` of each posed bone's first anny bone
+    group_heads: list[int] = []
     for b, (_, bones) in enumerate(POSED_BONE_SPEC):
         group_heads.append(len(articulated))
         for name in bones:
@@ -126,17 +185,36 @@ def build_reduction(model, regression_weights: Tensor) -> KeypointReduction:
             )
     is_group_head = [e in set(group_heads) for e in range(len(articulated))]
     owner = [pose_index[e] if is_group_head[e] else posed_parents[pose_index[e]] for e in range(len(articulated))]
+    return _ArticulatedRig(
+        parents, articulated, pose_index, group_heads, members, tuple(posed_parents), is_group_head, owner
+    )
 
-    dtype, device = regression_weights.dtype, regression_weights.device
-    # Work in float64: the reduced tensors are sums over thousands of vertices.
-    W = regression_weights.to(torch.float64)
-    num_keypoints, num_vertices = W.shape
-    skin = torch.zeros(num_vertices, len(labels), dtype=torch.float64, device=device)
+
+def _skinning_matrix(model, num_vertices: int, num_bones: int, device: torch.device) -> Tensor:
+    """anny's sparse skinning weights as a dense (V, num_bones) float64 matrix ``w_ij``."""
+    skin = torch.zeros(num_vertices, num_bones, dtype=torch.float64, device=device)
     skin.scatter_add_(1, model.vertex_bone_indices.long(), model.vertex_bone_weights.to(torch.float64))
-    affine_all = W @ skin  # (K, 104)
-    weighted = torch.nonzero((affine_all != 0).any(dim=0)).flatten()
-    group = torch.tensor([_nearest_in(int(j), members, parents) for j in weighted], device=device)
+    return skin
 
+
+@dataclass(frozen=True)
+class _LinearTerms:
+    """``s_kj`` in float64: ``template`` (K, J, 3) of the template mesh, ``basis`` (C, K, J, 3) per blendshape."""
+
+    template: Tensor
+    basis: Tensor
+
+
+def _linear_terms(model, W: Tensor, skin: Tensor, weighted: Tensor) -> _LinearTerms:
+    """``s_kj = sum_i W_ki w_ij v_i`` for the template mesh and each blendshape, over the weighted bones.
+
+    Args:
+        model: the ``anny.Anny`` instance.
+        W: (K, V) float64 keypoint regressor.
+        skin: (V, 104) float64 skinning weights.
+        weighted: (J,) anny bones with non-zero keypoint weight.
+    """
+    num_keypoints, device = W.shape[0], W.device
     # Only the vertices that some keypoint reads (about 8,800 of 13,718) matter.
     read = torch.nonzero((W != 0).any(dim=0)).flatten()
     W, skin = W[:, read], skin[read][:, weighted]
@@ -154,31 +232,26 @@ def build_reduction(model, regression_weights: Tensor) -> KeypointReduction:
         per_bone = per_bone[:, bones]
         linear_template[k, bones] = per_bone.T @ template[vertices]
         linear_basis[:, k, bones] = (per_bone.T @ blendshapes[vertices]).reshape(len(bones), -1, 3).permute(1, 0, 2)
-    affine_kj = affine_all[:, weighted]
-    affine_ke = torch.zeros(num_keypoints, len(articulated), dtype=torch.float64, device=device)
+    return _LinearTerms(linear_template, linear_basis)
+
+
+@dataclass(frozen=True)
+class _AffineTerms:
+    """The keypoint weight of each bone, float64: ``kj`` (K, J), ``ke`` (K, E) and ``kb`` (K, B)."""
+
+    kj: Tensor
+    ke: Tensor
+    kb: Tensor
+
+
+def _affine_terms(affine_kj: Tensor, group: Tensor, rig: _ArticulatedRig) -> _AffineTerms:
+    """Sum ``c_kj`` (K, J) over each articulated bone's followers (``group``, (J,)), then by translation owner."""
+    num_keypoints, device = affine_kj.shape[0], affine_kj.device
+    affine_ke = torch.zeros(num_keypoints, len(rig.articulated), dtype=torch.float64, device=device)
     affine_ke.index_add_(1, group, affine_kj)
     affine_kb = torch.zeros(num_keypoints, len(POSED_BONE_SPEC), dtype=torch.float64, device=device)
-    affine_kb.index_add_(1, torch.tensor(owner, device=device), affine_ke)
-    logger.debug(
-        "keypoint reduction: %d articulated bones, %d weighted anny bones, %d blendshapes",
-        len(articulated), len(weighted), num_coefficients,
-    )
-    return KeypointReduction(
-        articulated_bones=torch.tensor(articulated, device=device),
-        pose_index=torch.tensor(pose_index, device=device),
-        translation_owner=torch.tensor(owner, device=device),
-        is_group_head=torch.tensor(is_group_head, device=device),
-        joint_bones=torch.tensor([articulated[e] for e in group_heads], device=device),
-        posed_parents=tuple(posed_parents),
-        chain=chain_levels(posed_parents).to(device),
-        weighted_bones=weighted,
-        weighted_group=group,
-        affine_kj=affine_kj.to(dtype),
-        affine_ke=affine_ke.to(dtype),
-        affine_kb=affine_kb.to(dtype),
-        linear_template=linear_template.to(dtype),
-        linear_basis=linear_basis.to(dtype),
-    )
+    affine_kb.index_add_(1, torch.tensor(rig.translation_owner, device=device), affine_ke)
+    return _AffineTerms(affine_kj, affine_ke, affine_kb)
 
 
 def rest_bone_poses(model, coefficients: Tensor) -> Tensor:

@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import linear_sum_assignment
 
-from humancal.camera import Camera, project_points
+from humancal.camera import Camera, CameraRig, project_points
 from humancal.tables import validate_table
 
 __all__ = ["GroundTruthMatch", "match_ground_truth"]
@@ -49,7 +49,7 @@ class GroundTruthMatch:
 def match_ground_truth(
     detections: pd.DataFrame,
     gt_poses: pd.DataFrame,
-    cameras: Sequence[Camera],
+    cameras: CameraRig,
     *,
     joints: Sequence[str] | None = None,
     threshold_fraction: float = 0.05,
@@ -76,12 +76,39 @@ def match_ground_truth(
     """
     detections = validate_table(detections, "detections", source="match_ground_truth detections")
     gt_poses = validate_table(gt_poses, "poses3d", source="match_ground_truth gt_poses")
+    _check_parameters(threshold_fraction, min_visible_fraction, min_common_joints)
+    joints = _evaluated_joints(detections, gt_poses, joints)
+    _check_views(detections, cameras)
+    joint_index = {name: i for i, name in enumerate(joints)}
+    dets = _index_detections(detections, joint_index)
+    gt = _index_ground_truth(gt_poses, joint_index)
+    min_visible = max(1, int(np.ceil(min_visible_fraction * len(joints))))
+
+    rows = _MatchRows([], [], [])
+    for (seq, frame), gt_rows in sorted(gt.rows_by_frame.items()):
+        person_ids, people_m = _frame_people(gt, gt_rows, len(joints))
+        for view, cam in enumerate(cameras):
+            people = _project_people(cam, person_ids, people_m, min_visible)
+            det_ids, det_px = _image_detections(dets, (seq, frame, view), len(joints))
+            threshold_px = threshold_fraction * float(np.hypot(cam.width_px, cam.height_px))
+            match = _match_image(people.px, people.inside, people.counted, det_px, threshold_px, min_common_joints)
+            rows.extend(_image_rows((seq, frame, view), people, det_ids, match, joints))
+    rows.extend(_rows_without_ground_truth(dets, gt.rows_by_frame))
+    return rows.tables()
+
+
+def _check_parameters(threshold_fraction: float, min_visible_fraction: float, min_common_joints: int) -> None:
+    """Raise ``ValueError`` for a matching parameter out of its range."""
     if not 0.0 < threshold_fraction:
         raise ValueError(f"threshold_fraction must be > 0, got {threshold_fraction}")
     if not 0.0 <= min_visible_fraction <= 1.0:
         raise ValueError(f"min_visible_fraction must lie in [0, 1], got {min_visible_fraction}")
     if min_common_joints < 1:
         raise ValueError(f"min_common_joints must be >= 1, got {min_common_joints}")
+
+
+def _evaluated_joints(detections: pd.DataFrame, gt_poses: pd.DataFrame, joints: Sequence[str] | None) -> list[str]:
+    """The joint names to evaluate: ``joints``, or the names both tables use in ground-truth order; never empty."""
     if joints is None:
         det_names = set(detections["joint"].unique())
         joints = [j for j in dict.fromkeys(gt_poses["joint"]) if j in det_names]
@@ -91,85 +118,193 @@ def match_ground_truth(
             "match_ground_truth: the detections and the ground truth share no joint names "
             f"(ground truth has {sorted(gt_poses['joint'].unique())})"
         )
+    return joints
+
+
+def _check_views(detections: pd.DataFrame, cameras: CameraRig) -> None:
+    """Raise ``ValueError`` when a detection names a view that has no camera."""
     views = sorted(detections["view"].unique().tolist())
     missing = [v for v in views if v >= len(cameras)]
     if missing:
         raise ValueError(f"match_ground_truth: detections name view(s) {missing} but only {len(cameras)} cameras given")
-    jidx = {name: i for i, name in enumerate(joints)}
 
-    # Plain numpy arrays grouped by image: pandas group objects are too slow for thousands of images.
+
+# Plain numpy arrays grouped by image or frame: pandas group objects are too slow for thousands of images.
+
+
+@dataclass(frozen=True)
+class _DetectionIndex:
+    """The detections as flat arrays with their positions per image, keyed ``(sequence, frame, view)``.
+
+    Attributes:
+        ids_by_image: positions into ``all_det_id`` of every detection of each image, scored or not.
+        all_det_id: (D,) ``det_id`` of each distinct (sequence, frame, view, det_id).
+        rows_by_image: positions into the arrays below of each image's scored rows of evaluated joints.
+        det_id: (N,) ``det_id`` of each scored row.
+        joint: (N,) evaluated-joint index of each scored row.
+        xy_px: (N, 2) detected position of each scored row, pixels.
+    """
+
+    ids_by_image: dict[tuple, np.ndarray]
+    all_det_id: np.ndarray
+    rows_by_image: dict[tuple, np.ndarray]
+    det_id: np.ndarray
+    joint: np.ndarray
+    xy_px: np.ndarray
+
+
+def _index_detections(detections: pd.DataFrame, joint_index: dict[str, int]) -> _DetectionIndex:
+    """Index the detections by image; only rows with a positive score on an evaluated joint carry a position."""
     all_dets = detections[["sequence", "frame", "view", "det_id"]].drop_duplicates()
-    ids_by_image = _group_rows(all_dets, ["sequence", "frame", "view"])
-    det = detections[detections["joint"].isin(jidx) & (detections["score"] > 0)]
-    det_by_image = _group_rows(det, ["sequence", "frame", "view"])
-    det_id, det_joint = det["det_id"].to_numpy(), det["joint"].map(jidx).to_numpy()
-    det_xy = det[["x_px", "y_px"]].to_numpy()
-    all_det_id = all_dets["det_id"].to_numpy()
-    gt = gt_poses[gt_poses["joint"].isin(jidx) & gt_poses["valid"]]
-    gt_by_frame = _group_rows(gt, ["sequence", "frame"])
-    gt_pid, gt_joint = gt["person_id"].to_numpy(), gt["joint"].map(jidx).to_numpy()
-    gt_xyz = gt[["x_m", "y_m", "z_m"]].to_numpy()
-    min_visible = max(1, int(np.ceil(min_visible_fraction * len(joints))))
+    det = detections[detections["joint"].isin(joint_index) & (detections["score"] > 0)]
+    return _DetectionIndex(
+        ids_by_image=_group_rows(all_dets, ["sequence", "frame", "view"]),
+        all_det_id=all_dets["det_id"].to_numpy(),
+        rows_by_image=_group_rows(det, ["sequence", "frame", "view"]),
+        det_id=det["det_id"].to_numpy(),
+        joint=det["joint"].map(joint_index).to_numpy(),
+        xy_px=det[["x_px", "y_px"]].to_numpy(),
+    )
 
-    pv_rows, det_rows, err_rows = [], [], []
-    for (seq, frame), rows in sorted(gt_by_frame.items()):
-        pids = np.unique(gt_pid[rows])
-        X = np.full((len(pids), len(joints), 3), np.nan)
-        X[np.searchsorted(pids, gt_pid[rows]), gt_joint[rows]] = gt_xyz[rows]
-        for view, cam in enumerate(cameras):
-            gt_px, _ = project_points(cam, X)
-            inside = (
-                np.isfinite(gt_px).all(-1)
-                & (gt_px[..., 0] >= 0)
-                & (gt_px[..., 0] < cam.width_px)
-                & (gt_px[..., 1] >= 0)
-                & (gt_px[..., 1] < cam.height_px)
+
+@dataclass(frozen=True)
+class _GroundTruthIndex:
+    """The valid ground-truth rows of evaluated joints as flat arrays with their positions per ``(sequence, frame)``.
+
+    Attributes:
+        rows_by_frame: positions into the arrays below of each frame's rows.
+        person_id: (N,) person of each row.
+        joint: (N,) evaluated-joint index of each row.
+        xyz_m: (N, 3) world position of each row, metres.
+    """
+
+    rows_by_frame: dict[tuple, np.ndarray]
+    person_id: np.ndarray
+    joint: np.ndarray
+    xyz_m: np.ndarray
+
+
+def _index_ground_truth(gt_poses: pd.DataFrame, joint_index: dict[str, int]) -> _GroundTruthIndex:
+    """Index the valid ground-truth rows of evaluated joints by frame."""
+    gt = gt_poses[gt_poses["joint"].isin(joint_index) & gt_poses["valid"]]
+    return _GroundTruthIndex(
+        rows_by_frame=_group_rows(gt, ["sequence", "frame"]),
+        person_id=gt["person_id"].to_numpy(),
+        joint=gt["joint"].map(joint_index).to_numpy(),
+        xyz_m=gt[["x_m", "y_m", "z_m"]].to_numpy(),
+    )
+
+
+def _frame_people(gt: _GroundTruthIndex, rows: np.ndarray, num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """The sorted person ids (P,) of one frame and their (P, J, 3) world joints in metres, NaN where absent."""
+    person_ids = np.unique(gt.person_id[rows])
+    people_m = np.full((len(person_ids), num_joints, 3), np.nan)
+    people_m[np.searchsorted(person_ids, gt.person_id[rows]), gt.joint[rows]] = gt.xyz_m[rows]
+    return person_ids, people_m
+
+
+@dataclass(frozen=True)
+class _ProjectedPeople:
+    """The ground-truth people of one frame projected into one view.
+
+    Attributes:
+        person_ids: (P,) ground-truth person ids.
+        px: (P, J, 2) projected joints, pixels.
+        inside: (P, J) the projected joint is visible (finite, inside the image).
+        counted: (P,) the person-view has enough visible joints to count.
+    """
+
+    person_ids: np.ndarray
+    px: np.ndarray
+    inside: np.ndarray
+    counted: np.ndarray
+
+
+def _project_people(cam: Camera, person_ids: np.ndarray, people_m: np.ndarray, min_visible: int) -> _ProjectedPeople:
+    """Project a frame's people (P, J, 3) into ``cam`` and mark the visible joints and the counted person-views."""
+    px, _ = project_points(cam, people_m)
+    inside = (
+        np.isfinite(px).all(-1)
+        & (px[..., 0] >= 0)
+        & (px[..., 0] < cam.width_px)
+        & (px[..., 1] >= 0)
+        & (px[..., 1] < cam.height_px)
+    )
+    return _ProjectedPeople(person_ids, px, inside, inside.sum(-1) >= min_visible)
+
+
+def _image_detections(dets: _DetectionIndex, image: tuple, num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """The sorted detection ids (D,) of one image and their (D, J, 2) joints in pixels, NaN where not detected."""
+    ids = np.unique(dets.all_det_id[dets.ids_by_image.get(image, [])])
+    det_px = np.full((len(ids), num_joints, 2), np.nan)
+    rows = dets.rows_by_image.get(image, [])
+    det_px[np.searchsorted(ids, dets.det_id[rows]), dets.joint[rows]] = dets.xy_px[rows]
+    return ids, det_px
+
+
+@dataclass(frozen=True)
+class _MatchRows:
+    """Row tuples of the three output tables, gathered image by image."""
+
+    person_views: list[tuple]
+    detections: list[tuple]
+    joint_errors: list[tuple]
+
+    def extend(self, other: _MatchRows) -> None:
+        """Append ``other``'s rows after these."""
+        self.person_views.extend(other.person_views)
+        self.detections.extend(other.detections)
+        self.joint_errors.extend(other.joint_errors)
+
+    def tables(self) -> GroundTruthMatch:
+        """The rows as the tables of :class:`GroundTruthMatch`."""
+        person_views = pd.DataFrame(
+            self.person_views,
+            columns=["sequence", "frame", "view", "person_id", "counted", "visible_joints", "det_id", "mean_error_px"],
+        )
+        det_table = pd.DataFrame(
+            self.detections,
+            columns=["sequence", "frame", "view", "det_id", "matched_person", "nearest_person", "fragment"],
+        )
+        errors = pd.DataFrame(self.joint_errors, columns=["sequence", "frame", "view", "det_id", "joint", "error_px"])
+        return GroundTruthMatch(person_views, det_table, errors)
+
+
+def _image_rows(
+    image: tuple, people: _ProjectedPeople, det_ids: np.ndarray, m: _ImageMatch, joints: list[str]
+) -> _MatchRows:
+    """The output rows of one ``(sequence, frame, view)`` image from its matching ``m``."""
+    pids = people.person_ids
+    rows = _MatchRows([], [], [])
+    for p, d in enumerate(m.person_det):
+        if d >= 0:
+            rows.joint_errors.extend(
+                (*image, int(det_ids[d]), joints[j], float(m.dist[p, d, j])) for j in np.flatnonzero(m.common[p, d])
             )
-            counted = inside.sum(-1) >= min_visible
-            ids = np.unique(all_det_id[ids_by_image.get((seq, frame, view), [])])
-            det_px = np.full((len(ids), len(joints), 2), np.nan)
-            drows = det_by_image.get((seq, frame, view), [])
-            det_px[np.searchsorted(ids, det_id[drows]), det_joint[drows]] = det_xy[drows]
-            threshold_px = threshold_fraction * float(np.hypot(cam.width_px, cam.height_px))
-            m = _match_image(gt_px, inside, counted, det_px, threshold_px, min_common_joints)
-            for p, d in enumerate(m.person_det):
-                if d >= 0:
-                    err_rows.extend(
-                        (seq, frame, view, int(ids[d]), joints[j], float(m.dist[p, d, j]))
-                        for j in np.flatnonzero(m.common[p, d])
-                    )
-                pv_rows.append(
-                    (
-                        seq,
-                        frame,
-                        view,
-                        int(pids[p]),
-                        bool(counted[p]),
-                        int(inside[p].sum()),
-                        int(ids[d]) if d >= 0 else -1,
-                        float(m.mean[p, d]) if d >= 0 else np.nan,
-                    )
-                )
-            for d, det_id_d in enumerate(ids):
-                matched = int(pids[m.det_person[d]]) if m.det_person[d] >= 0 else -1
-                near = int(pids[m.nearest[d]]) if m.nearest[d] >= 0 else -1
-                det_rows.append((seq, frame, view, int(det_id_d), matched, near, bool(near >= 0 and matched < 0)))
-    # Detections in frames without any ground truth: neither matched nor fragments.
-    for (seq, frame, view), rows in ids_by_image.items():
-        if (seq, frame) not in gt_by_frame:
-            det_rows.extend((seq, frame, view, int(d), -1, -1, False) for d in np.unique(all_det_id[rows]))
-
-    person_views = pd.DataFrame(
-        pv_rows,
-        columns=["sequence", "frame", "view", "person_id", "counted", "visible_joints", "det_id", "mean_error_px"],
-    )
-    det_table = pd.DataFrame(
-        det_rows, columns=["sequence", "frame", "view", "det_id", "matched_person", "nearest_person", "fragment"]
-    )
-    errors = pd.DataFrame(err_rows, columns=["sequence", "frame", "view", "det_id", "joint", "error_px"])
-    return GroundTruthMatch(person_views, det_table, errors)
+        rows.person_views.append(
+            (
+                *image,
+                int(pids[p]),
+                bool(people.counted[p]),
+                int(people.inside[p].sum()),
+                int(det_ids[d]) if d >= 0 else -1,
+                float(m.mean[p, d]) if d >= 0 else np.nan,
+            )
+        )
+    for d, det_id_d in enumerate(det_ids):
+        matched = int(pids[m.det_person[d]]) if m.det_person[d] >= 0 else -1
+        near = int(pids[m.nearest[d]]) if m.nearest[d] >= 0 else -1
+        rows.detections.append((*image, int(det_id_d), matched, near, bool(near >= 0 and matched < 0)))
+    return rows
 
 
+def _rows_without_ground_truth(dets: _DetectionIndex, gt_frames: dict[tuple, np.ndarray]) -> _MatchRows:
+    """Detection rows of the frames without any ground truth: neither matched nor fragments."""
+    rows = _MatchRows([], [], [])
+    for (seq, frame, view), ids in dets.ids_by_image.items():
+        if (seq, frame) not in gt_frames:
+            rows.detections.extend((seq, frame, view, int(d), -1, -1, False) for d in np.unique(dets.all_det_id[ids]))
+    return rows
 
 
 @dataclass(frozen=True)

@@ -101,6 +101,38 @@ def body_observations(detections: DenseDetections, associations: pd.DataFrame, s
             skeletons name a person the associations do not.
     """
     person_of = Associations.from_table(associations).person_of_detections(detections)
+    people = _people_to_fit(detections, person_of, min_views, min_frames)
+    index = _dense_index(detections, person_of, people.person_ids, num_views)
+    keypoints, confidence, present = _dense_detections(detections, index, num_views)
+    joints, joints_valid = _dense_joints(skeletons3d, people, index)
+    observations = BodyObservations(people.person_ids, index.frames, keypoints, confidence, joints, joints_valid,
+                                    present)
+    return observations, list(people.warnings)
+
+
+@dataclass(frozen=True)
+class _PeopleToFit:
+    """Who a body fit takes.
+
+    Attributes:
+        person_ids: (P,) int64 ids of the people fitted, ascending.
+        associated: ids of every person some detection belongs to (fitted or left out), ascending.
+        warnings: the people left out, and why.
+    """
+
+    person_ids: np.ndarray
+    associated: np.ndarray
+    warnings: tuple[str, ...]
+
+
+def _people_to_fit(detections: DenseDetections, person_of: np.ndarray, min_views: int,
+                   min_frames: int) -> _PeopleToFit:
+    """The people seen in at least ``min_views`` views and ``min_frames`` frames (``person_of``: (D,) the person
+    of each detection, -1 none); a warning names each one left out.
+
+    Raises:
+        FittingInputError: no detection belongs to a person, or no person is seen enough.
+    """
     used = person_of >= 0
     if not used.any():
         raise FittingInputError("associations: no detection belongs to a person (every person_id is -1): "
@@ -118,19 +150,60 @@ def body_observations(detections: DenseDetections, associations: pd.DataFrame, s
         keep.append(pid)
     if not keep:
         raise FittingInputError(f"no person can be fitted: {'; '.join(warnings)}")
-    person_ids = np.asarray(keep, dtype=np.int64)
+    return _PeopleToFit(np.asarray(keep, dtype=np.int64), candidates, tuple(warnings))
+
+
+@dataclass(frozen=True)
+class _DenseIndex:
+    """Where the fitted people's detections go in the dense (view, person, frame) arrays.
+
+    Attributes:
+        rows: (D,) the rows of those detections in the detections.
+        view, person, frame: (D,) their view v, person p and frame t indices in the dense arrays.
+        frames: (T,) consecutive frame numbers, the first to the last frame any fitted person was seen
+            (``t = frame number - frames[0]``).
+        num_people: P.
+    """
+
+    rows: np.ndarray
+    view: np.ndarray
+    person: np.ndarray
+    frame: np.ndarray
+    frames: np.ndarray
+    num_people: int
+
+
+def _dense_index(detections: DenseDetections, person_of: np.ndarray, person_ids: np.ndarray,
+                 num_views: int) -> _DenseIndex:
+    """The dense index of every detection of the people ``person_ids`` (``person_of``: (D,) the person of each
+    detection).
+
+    Raises:
+        FittingInputError: a view number outside ``0 .. num_views - 1``.
+    """
     rows = np.flatnonzero(np.isin(person_of, person_ids))
     first, last = int(detections.frame[rows].min()), int(detections.frame[rows].max())
     frames = np.arange(first, last + 1)
-    P, T = len(person_ids), len(frames)
     if (detections.view[rows] >= num_views).any() or (detections.view[rows] < 0).any():
         raise FittingInputError(f"detections: view numbers must be 0..{num_views - 1} (the cameras), got "
                                 f"{sorted(set(detections.view[rows].tolist()))}")
+    return _DenseIndex(rows=rows, view=detections.view[rows], person=np.searchsorted(person_ids, person_of[rows]),
+                       frame=detections.frame[rows] - first, frames=frames, num_people=len(person_ids))
+
+
+def _dense_detections(detections: DenseDetections, index: _DenseIndex,
+                      num_views: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (V, P, T, 23, 2) keypoints in pixels and (V, P, T, 23) confidences of the fitted people (0 where not
+    observed; of two detections of a person in one view and frame, the more confident), and (P, T) ``present``:
+    each person's first to last frame with a detection.
+
+    Raises:
+        FittingInputError: a keypoint with a score > 0 is not finite.
+    """
+    P, T = index.num_people, len(index.frames)
+    rows = index.rows
     keypoints = np.zeros((num_views, P, T, NUM_JOINTS, 2))
     confidence = np.zeros((num_views, P, T, NUM_JOINTS))
-    p_idx = np.searchsorted(person_ids, person_of[rows])
-    t_idx = detections.frame[rows] - first
-    v_idx = detections.view[rows]
     scores = np.where(detections.valid[rows], detections.scores[rows], 0.0)
     points = detections.keypoints_px[rows]
     bad = (scores > 0) & ~np.isfinite(points).all(-1)
@@ -139,6 +212,7 @@ def body_observations(detections: DenseDetections, associations: pd.DataFrame, s
         raise FittingInputError(f"detections: frame {detections.frame[r]}, view {detections.view[r]}, det_id "
                                 f"{detections.det_id[r]} has a non-finite keypoint with score > 0 (x_px, y_px must "
                                 f"be finite numbers wherever score > 0)")
+    v_idx, p_idx, t_idx = index.view, index.person, index.frame
     # One detection per (view, person, frame): where the association gave a person two, keep the more confident.
     order = np.argsort(scores.sum(-1), kind="stable")
     keypoints[v_idx[order], p_idx[order], t_idx[order]] = np.nan_to_num(points[order])
@@ -149,11 +223,24 @@ def body_observations(detections: DenseDetections, associations: pd.DataFrame, s
     for p in range(P):
         on = np.flatnonzero(seen[p])
         present[p, on[0]: on[-1] + 1] = True
+    return keypoints, confidence, present
 
+
+def _dense_joints(skeletons3d: pd.DataFrame, people: _PeopleToFit,
+                  index: _DenseIndex) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted people's (P, T, 23, 3) triangulated joints, world metres, and their (P, T, 23) validity (valid
+    rows with finite coordinates; 0 and False elsewhere).
+
+    Raises:
+        FittingInputError: the skeletons name a person no detection belongs to, or a fitted person has no valid
+            joint.
+    """
+    person_ids, P, T = people.person_ids, index.num_people, len(index.frames)
+    first, last = int(index.frames[0]), int(index.frames[-1])
     joints = np.zeros((P, T, NUM_JOINTS, 3))
     joints_valid = np.zeros((P, T, NUM_JOINTS), bool)
     sk = skeletons3d[skeletons3d["person_id"].isin(person_ids) & skeletons3d["frame"].between(first, last)]
-    unknown = sorted(set(skeletons3d["person_id"].unique().tolist()) - set(candidates.tolist()))
+    unknown = sorted(set(skeletons3d["person_id"].unique().tolist()) - set(people.associated.tolist()))
     if unknown:
         raise FittingInputError(f"skeletons3d: person ids {unknown[:5]} are in no association")
     if len(sk):
@@ -168,7 +255,7 @@ def body_observations(detections: DenseDetections, associations: pd.DataFrame, s
     if no_3d:
         raise FittingInputError(f"skeletons3d: persons {no_3d} have no valid triangulated joint: a body cannot be "
                                 f"placed without one")
-    return BodyObservations(person_ids, frames, keypoints, confidence, joints, joints_valid, present), warnings
+    return joints, joints_valid
 
 
 MIN_SWAP_JOINTS = 6

@@ -34,7 +34,7 @@ import torch
 from torch import Tensor
 
 from humancal.body import BodyModel
-from humancal.camera import Camera, intrinsic_matrices
+from humancal.camera import Camera, CameraRig, intrinsic_matrices
 from humancal.geometry.pose_errors import mpjpe_mm
 from humancal.prior.fitting import FitConfig, KeypointObservations, fit_motion
 from humancal.prior.model import MotionVAE, pose6d_to_rotmats, rotmats_to_pose6d, with_root
@@ -258,8 +258,8 @@ def corrupt_keypoints_3d(keypoints_m: Tensor, generator: torch.Generator, noise_
 
 def virtual_cameras(views: int = VIRTUAL_RIG["views"], distance_m: float = VIRTUAL_RIG["distance_m"],
                     height_m: float = VIRTUAL_RIG["height_m"], focal_px: float = VIRTUAL_RIG["focal_px"],
-                    size_px: tuple[int, int] = VIRTUAL_RIG["size_px"]) -> tuple[Camera, ...]:
-    """``views`` pinhole cameras evenly around the origin, looking at a point 1 m above it."""
+                    size_px: tuple[int, int] = VIRTUAL_RIG["size_px"]) -> CameraRig:
+    """The rig of ``views`` pinhole cameras evenly around the origin, looking at a point 1 m above it."""
     width, height = size_px
     K = intrinsic_matrices(focal_px, focal_px, (width - 1) / 2.0, (height - 1) / 2.0)
     K = np.asarray(K).reshape(3, 3)
@@ -269,16 +269,16 @@ def virtual_cameras(views: int = VIRTUAL_RIG["views"], distance_m: float = VIRTU
         centre = np.array([distance_m * np.cos(angle), distance_m * np.sin(angle), height_m])
         R = look_at(centre, np.array([0.0, 0.0, 1.0]))
         cameras.append(Camera(K, R, -R @ centre, width, height))
-    return tuple(cameras)
+    return CameraRig.from_cameras(cameras)
 
 
-def corrupt_keypoints_2d(keypoints_m: Tensor, cameras: Sequence[Camera], generator: torch.Generator,
+def corrupt_keypoints_2d(keypoints_m: Tensor, cameras: CameraRig, generator: torch.Generator,
                          noise_px: float = DENOISE_NOISE_PX, missing: float = DENOISE_MISSING) -> KeypointObservations:
     """The keypoints projected into each camera, with pixel noise and some missing in each view.
 
     Args:
         keypoints_m: (P, T, 23, 3) clean keypoints, metres.
-        cameras: the V cameras.
+        cameras: the rig of the V cameras.
         generator: the source of the noise and of the missing keypoints.
         noise_px: noise standard deviation per coordinate, pixels.
         missing: probability that a keypoint is missing in a view.
@@ -296,7 +296,7 @@ def corrupt_keypoints_2d(keypoints_m: Tensor, cameras: Sequence[Camera], generat
     visible = (torch.rand(pixels.shape[:-1], generator=generator) >= missing).to(pixels.device)
     visible = visible & in_front.reshape(V, P, T, J)
     scale = noise_px if noise_px > 0 else 1.0  # the data term's unit; noise-free data gets 1 px
-    return KeypointObservations(pixels + noise, visible, scale, tuple(cameras))
+    return KeypointObservations(pixels + noise, visible, scale, cameras)
 
 
 # ---------------------------------------------------------------------------------------------------- benchmark

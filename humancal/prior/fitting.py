@@ -22,8 +22,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from dataclasses import dataclass, field
 
 import numpy as np
 import roma
@@ -31,7 +30,8 @@ import torch
 from torch import Tensor
 
 from humancal.body import BodyModel, RestSkeleton
-from humancal.camera import Camera
+from humancal.camera import CameraRig
+from humancal.config import Config, at_least, in_range, positive
 from humancal.geometry.projection import project_points_torch
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
@@ -49,7 +49,7 @@ _MAX_FROM_MEDIAN_M = 1.5
 
 
 @dataclass(frozen=True)
-class FitConfig:
+class FitConfig(Config):
     """Weights and optimisation of one fit (:func:`fit_motion`).
 
     Attributes:
@@ -64,30 +64,13 @@ class FitConfig:
         root_smooth_scale_m: scale of the root's second difference, metres per frame^2.
     """
 
-    iterations: int = 300
-    learning_rate: float = 0.05
-    weight_latent: float = 1e-3
-    weight_local_linear: float = 1.0
-    weight_rest: float = 1e-4
-    weight_root_smooth: float = 0.1
-    root_smooth_scale_m: float = 0.01
-
-    def __post_init__(self) -> None:
-        if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or not 1 <= self.iterations <= 1_000_000:
-            raise ValueError(f"FitConfig.iterations={self.iterations!r} must be an integer in [1, 1000000]")
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name != "iterations" and (not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0):
-                raise ValueError(f"FitConfig.{f.name}={value!r} must be a finite number >= 0")
-        if self.learning_rate <= 0 or self.root_smooth_scale_m <= 0:
-            raise ValueError("FitConfig.learning_rate and root_smooth_scale_m must be > 0")
-
-    def replace(self, **changes: Any) -> FitConfig:
-        """A validated copy with some fields changed (ValueError for an unknown field)."""
-        unknown = sorted(set(changes) - {f.name for f in fields(self)})
-        if unknown:
-            raise ValueError(f"FitConfig has no field(s) {unknown}")
-        return replace(self, **changes)
+    iterations: int = field(default=300, metadata=in_range(1, 1_000_000, integer=True))
+    learning_rate: float = field(default=0.05, metadata=positive())
+    weight_latent: float = field(default=1e-3, metadata=at_least(0))
+    weight_local_linear: float = field(default=1.0, metadata=at_least(0))
+    weight_rest: float = field(default=1e-4, metadata=at_least(0))
+    weight_root_smooth: float = field(default=0.1, metadata=at_least(0))
+    root_smooth_scale_m: float = field(default=0.01, metadata=positive())
 
 
 @dataclass(frozen=True)
@@ -98,15 +81,17 @@ class KeypointObservations:
         points: (P, T, 23, 3) world metres, or (V, P, T, 23, 2) pixels.
         visible: (P, T, 23) or (V, P, T, 23) bool; False marks a missing keypoint (its ``points`` are ignored).
         noise_scale: the data term's unit: metres (3D) or pixels (2D), e.g. the noise's standard deviation.
-        cameras: the V cameras of 2D observations; empty for 3D.
+        cameras: the V cameras of 2D observations (a list is taken as a rig); None for 3D.
     """
 
     points: Tensor
     visible: Tensor
     noise_scale: float
-    cameras: tuple[Camera, ...] = field(default=())
+    cameras: CameraRig | None = None
 
     def __post_init__(self) -> None:
+        if self.cameras is not None:
+            object.__setattr__(self, "cameras", CameraRig.of(self.cameras))
         dims = 2 if self.cameras else 3
         lead = 4 if self.cameras else 3
         if not isinstance(self.points, Tensor) or self.points.ndim != lead + 1 or self.points.shape[-1] != dims \
@@ -185,7 +170,7 @@ def _observed_points_3d(observations: KeypointObservations) -> tuple[np.ndarray,
     V, P, T, J, _ = observations.points.shape
     pixels = observations.points.detach().cpu().double().numpy().reshape(V, P * T * J, 2)
     weights = observations.visible.cpu().numpy().reshape(V, P * T * J).astype(np.float64)
-    points, views = triangulate_dlt(list(observations.cameras), pixels, weights, min_views=2)
+    points, views = triangulate_dlt(observations.cameras, pixels, weights, min_views=2)
     points, valid = points.reshape(P, T, J, 3), ((views >= 2) & np.isfinite(points).all(axis=-1)).reshape(P, T, J)
     # Two views facing each other see a point along nearly the same ray: its triangulation can land metres away.
     # Keep the points within 1.5 m of the frame's median point (a body is smaller than that around its middle).
@@ -275,6 +260,55 @@ def fit_motion(
         raise ValueError(f"fit_motion: observations must be {body.dtype} like the body model, got {observations.points.dtype}")
     start = time.perf_counter()
     P, T = observations.num_people, observations.num_frames
+    variables = _initial_variables(body, rest, observations, prior)
+    cameras = _camera_tensors(observations, body) if observations.is_2d else None
+    loss = _optimize(body, rest, observations, variables, cameras, config)
+    with torch.no_grad():
+        rotmats = variables.bone_rotmats()
+        keypoints = body.keypoints(rest, rotmats, variables.translation)
+    seconds = time.perf_counter() - start
+    log.info("fit of %d x %d frames (%s): loss %.4f in %.1f s", P, T,
+             "no prior" if prior is None else prior.config.variant, float(loss.detach()), seconds)
+    return FitResult(
+        bone_rotmats_local=rotmats.detach(),
+        root_translation_m=variables.translation.detach(),
+        keypoints_m=keypoints.detach(),
+        latents=variables.body_params.detach() if prior is not None else None,
+        final_loss=float(loss.detach()),
+        seconds=seconds,
+    )
+
+
+@dataclass(frozen=True)
+class _MotionVariables:
+    """The variables of a motion fit (leaf tensors the optimiser moves in place), and how they pose the body.
+
+    Attributes:
+        root6d: (P, T, 6) root orientations (6D).
+        translation: (P, T, 3) root translations, metres.
+        body_params: (P, T, latent_dim) latent codes (prior fits), or (P, T, 21, 6) the bones' 6D rotations.
+        identity: (P, T, 21, 6) the reference pose in 6D (where the no-prior fit's rest term pulls).
+        prior: the motion VAE, in eval mode and without gradients of its own (None: the no-prior fit).
+    """
+
+    root6d: Tensor
+    translation: Tensor
+    body_params: Tensor
+    identity: Tensor
+    prior: MotionVAE | None
+
+    def bone_rotmats(self) -> Tensor:
+        """(P, T, 22, 3, 3) posed-bone rotations, root first (the latents decoded by the prior)."""
+        six = self.prior.decode(self.body_params) if self.prior is not None else self.body_params
+        return with_root(pose6d_to_rotmats(six), pose6d_to_rotmats(self.root6d))
+
+
+def _initial_variables(body: BodyModel, rest: RestSkeleton, observations: KeypointObservations,
+                       prior: MotionVAE | None) -> _MotionVariables:
+    """The start: the root from a rigid fit of the reference pose (:func:`initial_root`), and the reference body
+    pose (no-prior fit) or the prior's encoding of it (prior fits; the prior is moved to the body model's dtype and
+    device, put in eval mode, and its weights frozen)."""
+    P, T = observations.num_people, observations.num_frames
     to = dict(dtype=body.dtype, device=body.device)
     root_R, root_t = initial_root(body, rest, observations)
     root6d = rotmats_to_pose6d(root_R).clone().requires_grad_()
@@ -288,43 +322,47 @@ def fit_motion(
         body_params = mu.clone().requires_grad_()
     else:
         body_params = identity.clone().requires_grad_()
-    cameras = None
-    if observations.is_2d:
-        cameras = tuple(torch.as_tensor(np.stack([getattr(c, name) for c in observations.cameras]), **to)
-                        for name in ("K", "R_cam_from_world", "t_cam_from_world_m"))
+    return _MotionVariables(root6d, translation, body_params, identity, prior)
 
-    def pose(params: Tensor) -> Tensor:
-        six = prior.decode(params) if prior is not None else params
-        return with_root(pose6d_to_rotmats(six), pose6d_to_rotmats(root6d))
 
-    optimizer = torch.optim.Adam([root6d, translation, body_params], lr=config.learning_rate)
-    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda i: 1.0 - 0.9 * i / config.iterations)
+def _camera_tensors(observations: KeypointObservations, body: BodyModel) -> tuple[Tensor, Tensor, Tensor]:
+    """The V cameras of 2D observations as ``(K, R_cam_from_world, t_cam_from_world_m)``: (V, 3, 3), (V, 3, 3) and
+    (V, 3) tensors in the body model's dtype and device."""
+    to = dict(dtype=body.dtype, device=body.device)
+    return tuple(torch.as_tensor(np.stack([getattr(c, name) for c in observations.cameras]), **to)
+                 for name in ("K", "R_cam_from_world", "t_cam_from_world_m"))
+
+
+def _objective(body: BodyModel, rest: RestSkeleton, observations: KeypointObservations, variables: _MotionVariables,
+               cameras: tuple[Tensor, Tensor, Tensor] | None, config: FitConfig) -> Tensor:
+    """The weighted objective (module docstring): the data term, the root's smoothness, and the latent
+    regularizers (prior fits) or the decay toward the reference pose (no-prior fit)."""
+    v = variables
+    data, _ = _data_term(body, rest, observations, v.bone_rotmats(), v.translation, cameras)
     scale = config.root_smooth_scale_m
+    root_smooth = (_mean_square(_second_difference(v.translation) / scale)
+                   + _mean_square(_second_difference(v.root6d) / scale))
+    loss = data + config.weight_root_smooth * root_smooth
+    if v.prior is not None:
+        loss = loss + config.weight_latent * _mean_square(v.body_params)
+        loss = loss + config.weight_local_linear * _mean_square(_second_difference(v.body_params))
+    else:
+        loss = loss + config.weight_rest * _mean_square(v.body_params - v.identity)
+    return loss
+
+
+def _optimize(body: BodyModel, rest: RestSkeleton, observations: KeypointObservations, variables: _MotionVariables,
+              cameras: tuple[Tensor, Tensor, Tensor] | None, config: FitConfig) -> Tensor:
+    """Adam on the root and body pose, its learning rate decaying linearly to a tenth; the objective at the last
+    step."""
+    v = variables
+    optimizer = torch.optim.Adam([v.root6d, v.translation, v.body_params], lr=config.learning_rate)
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda i: 1.0 - 0.9 * i / config.iterations)
     loss = torch.zeros(())
     for _ in range(config.iterations):
         optimizer.zero_grad(set_to_none=True)
-        data, _ = _data_term(body, rest, observations, pose(body_params), translation, cameras)
-        root_smooth = _mean_square(_second_difference(translation) / scale) + _mean_square(_second_difference(root6d) / scale)
-        loss = data + config.weight_root_smooth * root_smooth
-        if prior is not None:
-            loss = loss + config.weight_latent * _mean_square(body_params)
-            loss = loss + config.weight_local_linear * _mean_square(_second_difference(body_params))
-        else:
-            loss = loss + config.weight_rest * _mean_square(body_params - identity)
+        loss = _objective(body, rest, observations, variables, cameras, config)
         loss.backward()
         optimizer.step()
         schedule.step()
-    with torch.no_grad():
-        rotmats = pose(body_params)
-        keypoints = body.keypoints(rest, rotmats, translation)
-    seconds = time.perf_counter() - start
-    log.info("fit of %d x %d frames (%s): loss %.4f in %.1f s", P, T,
-             "no prior" if prior is None else prior.config.variant, float(loss.detach()), seconds)
-    return FitResult(
-        bone_rotmats_local=rotmats.detach(),
-        root_translation_m=translation.detach(),
-        keypoints_m=keypoints.detach(),
-        latents=body_params.detach() if prior is not None else None,
-        final_loss=float(loss.detach()),
-        seconds=seconds,
-    )
+    return loss

@@ -14,7 +14,7 @@ The networks are small and their operations tiny: a second intra-op thread bough
 thread: about 30 s an epoch; two: about 26 s); two single-threaded workers were 9 % faster than two threads over a
 whole run there, and they grow with the cores (see ``docs/motion_prior.md``).
 The calling process is worker 0 (validation, progress, the result); the others are spawned and build their own
-body model.
+body model (:mod:`humancal.prior.workers`).
 
 Every random choice (windows, augmentation, initialisation, the reparameterisation noise) derives from
 ``config.seed``: the same clips, config and worker count give the same weights, bit for bit, on the same machine
@@ -26,19 +26,14 @@ from __future__ import annotations
 
 import logging
 import math
-import shutil
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from datetime import timedelta
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 import torch.distributed as dist
-import torch.multiprocessing as torch_mp
 
 from humancal.body.rest import RestSkeleton
 from humancal.lifter.evaluate import HELD_OUT_CMU_SUBJECTS
@@ -46,20 +41,17 @@ from humancal.prior.config import PriorConfig
 from humancal.prior.data import MotionClips, MotionWindows, clips_from_retargeted, sample_windows
 from humancal.prior.losses import pose_keypoints_m, prior_losses
 from humancal.prior.model import MotionVAE, pose6d_to_rotmats, rotmats_to_pose6d
+from humancal.prior.workers import EpochReport, average_over_workers, optimise_with_workers
 from humancal.retarget.threads import torch_threads
 
-__all__ = ["TrainedPrior", "train_motion_prior", "reconstruction_mpjpe_mm", "clip_rest_skeletons"]
+__all__ = ["TrainedPrior", "clip_rest_skeletons", "reconstruction_mpjpe_mm", "train_motion_prior"]
 
 logger = logging.getLogger(__name__)
 
 ProgressCallback = Callable[[dict[str, Any]], None]
-_EpochReport = Callable[[int, int, float, dict[str, list[float]], "MotionVAE"], None]
-"""Worker 0's end-of-epoch scoring: ``(epoch, step, lr, training terms, model)``."""
 
 _EVAL_CHUNK = 256
 _LOSS_NAMES = ("total", "pose6d", "keypoints_m2", "kl", "local_linear", "keypoint_error_m")
-_WORKER_TIMEOUT = timedelta(minutes=5)
-"""How long a worker waits for the others (start-up, then every gradient exchange) before giving up."""
 
 
 @dataclass(frozen=True)
@@ -155,6 +147,105 @@ def reconstruction_mpjpe_mm(
     }
 
 
+@dataclass(frozen=True)
+class _Clips:
+    """The clips of a run: all of them, and their split into training and held-out clips (whole subjects)."""
+
+    all: MotionClips
+    train: MotionClips
+    held_out: MotionClips
+
+
+@dataclass(frozen=True)
+class _HeldOutWindows:
+    """The fixed held-out windows scored after every epoch (plain: speed 1, forward, not mirrored).
+
+    Attributes:
+        windows: (B, T, 21, 3, 3) windows of the held-out clips and the clip of each.
+        rest: rest skeletons of the held-out clips (:func:`clip_rest_skeletons`).
+    """
+
+    windows: MotionWindows
+    rest: RestSkeleton
+
+
+def _checked_arguments(config: PriorConfig | None, workers: int, threads: int | None) -> tuple[PriorConfig, int | None]:
+    """The run's configuration (None: :meth:`PriorConfig.default`) and the torch threads of each worker.
+
+    Raises:
+        ValueError: not a :class:`PriorConfig`, a bad worker or thread count, or ``workers > 1`` while this process
+            already has a ``torch.distributed`` group.
+    """
+    config = PriorConfig.default() if config is None else config
+    if not isinstance(config, PriorConfig):
+        raise ValueError(f"config must be a PriorConfig, got {type(config).__name__}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1 or config.batch_size % workers:
+        raise ValueError(f"workers={workers!r} must be a positive integer dividing PriorConfig.batch_size="
+                         f"{config.batch_size}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ValueError(f"threads={threads!r} must be a positive integer or None")
+    if workers > 1 and dist.is_available() and dist.is_initialized():
+        raise ValueError("workers > 1 needs a process without a torch.distributed group; this one has one")
+    return config, threads if threads is not None else (None if workers == 1 else 1)
+
+
+def _split_clips(clips: Sequence | MotionClips, held_out_subjects: Sequence[str]) -> _Clips:
+    """The clips as :class:`MotionClips`, whole ``held_out_subjects`` held out of training.
+
+    Raises:
+        ValueError: malformed clips, or the split leaves no training or no held-out clip.
+    """
+    all_clips = clips if isinstance(clips, MotionClips) else clips_from_retargeted(clips)
+    train_clips, val_clips = all_clips.split_subjects(held_out_subjects)
+    return _Clips(all=all_clips, train=train_clips, held_out=val_clips)
+
+
+def _held_out_windows(val_clips: MotionClips, config: PriorConfig, body_model) -> _HeldOutWindows:
+    """``config.validation_windows`` plain windows of the held-out clips, drawn from the first stream of
+    ``config.seed``, and the rest skeletons of their clips."""
+    seeds = np.random.SeedSequence(config.seed).spawn(config.epochs + 1)
+    windows = sample_windows(val_clips, config.validation_windows, config, np.random.default_rng(seeds[0]), False)
+    return _HeldOutWindows(windows=windows, rest=clip_rest_skeletons(body_model, val_clips))
+
+
+def _epoch_reporter(
+    config: PriorConfig, held_out: _HeldOutWindows, body_model, start: float, history: list[dict[str, Any]],
+    progress: ProgressCallback | None,
+) -> EpochReport:
+    """Worker 0's end-of-epoch report: it scores the model on ``held_out``, appends the record to ``history`` (see
+    :class:`TrainedPrior`), logs it at INFO and passes it to ``progress``. ``start``: ``time.perf_counter()`` at the
+    start of the training."""
+
+    def report(epoch: int, step: int, lr: float, terms: dict[str, list[float]], model: MotionVAE) -> None:
+        scores = reconstruction_mpjpe_mm(model, held_out.windows, held_out.rest, body_model)
+        mean = {name: float(np.mean(values)) if values else float("nan") for name, values in terms.items()}
+        record = {
+            "epoch": epoch,
+            "steps": step,
+            "lr": lr,
+            "kl_weight": _kl_weight(config, step),
+            "train_loss": mean["total"],
+            "train_pose6d": mean["pose6d"],
+            "train_keypoints_m2": mean["keypoints_m2"],
+            "train_kl": mean["kl"],
+            "train_local_linear": mean["local_linear"],
+            "train_keypoint_error_mm": 1000.0 * mean["keypoint_error_m"],
+            "val_mpjpe_mm": scores["mpjpe_mm"],
+            "val_kl": scores["kl"],
+            "elapsed_s": time.perf_counter() - start,
+        }
+        history.append(record)
+        logger.info(
+            "epoch %d: loss %.4f, train keypoints %.1f mm, held-out MPJPE %.1f mm, KL %.3f (%.0f s)",
+            epoch, record["train_loss"], record["train_keypoint_error_mm"], record["val_mpjpe_mm"],
+            record["val_kl"], record["elapsed_s"],
+        )
+        if progress is not None:
+            progress({"kind": "epoch", **record})
+
+    return report
+
+
 def train_motion_prior(
     clips: Sequence | MotionClips,
     config: PriorConfig | None,
@@ -187,75 +278,35 @@ def train_motion_prior(
             worker or thread count, or ``workers > 1`` while this process already has a ``torch.distributed`` group.
         RuntimeError: a worker process failed (its error is in the message).
     """
-    config = PriorConfig.default() if config is None else config
-    if not isinstance(config, PriorConfig):
-        raise ValueError(f"config must be a PriorConfig, got {type(config).__name__}")
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1 or config.batch_size % workers:
-        raise ValueError(f"workers={workers!r} must be a positive integer dividing PriorConfig.batch_size="
-                         f"{config.batch_size}")
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-        raise ValueError(f"threads={threads!r} must be a positive integer or None")
-    if workers > 1 and dist.is_available() and dist.is_initialized():
-        raise ValueError("workers > 1 needs a process without a torch.distributed group; this one has one")
-    threads = threads if threads is not None else (None if workers == 1 else 1)
-    all_clips = clips if isinstance(clips, MotionClips) else clips_from_retargeted(clips)
-    train_clips, val_clips = all_clips.split_subjects(held_out_subjects)
+    config, threads = _checked_arguments(config, workers, threads)
+    clips = _split_clips(clips, held_out_subjects)
     start, start_cpu = time.perf_counter(), time.process_time()
-    seeds = np.random.SeedSequence(config.seed).spawn(config.epochs + 1)
-    val_windows = sample_windows(val_clips, config.validation_windows, config, np.random.default_rng(seeds[0]), False)
-    val_rest = clip_rest_skeletons(body_model, val_clips)
+    held_out = _held_out_windows(clips.held_out, config, body_model)
     history: list[dict[str, Any]] = []
-
-    def report(epoch: int, step: int, lr: float, terms: dict[str, list[float]], model: MotionVAE) -> None:
-        scores = reconstruction_mpjpe_mm(model, val_windows, val_rest, body_model)
-        mean = {name: float(np.mean(values)) if values else float("nan") for name, values in terms.items()}
-        record = {
-            "epoch": epoch,
-            "steps": step,
-            "lr": lr,
-            "kl_weight": _kl_weight(config, step),
-            "train_loss": mean["total"],
-            "train_pose6d": mean["pose6d"],
-            "train_keypoints_m2": mean["keypoints_m2"],
-            "train_kl": mean["kl"],
-            "train_local_linear": mean["local_linear"],
-            "train_keypoint_error_mm": 1000.0 * mean["keypoint_error_m"],
-            "val_mpjpe_mm": scores["mpjpe_mm"],
-            "val_kl": scores["kl"],
-            "elapsed_s": time.perf_counter() - start,
-        }
-        history.append(record)
-        logger.info(
-            "epoch %d: loss %.4f, train keypoints %.1f mm, held-out MPJPE %.1f mm, KL %.3f (%.0f s)",
-            epoch, record["train_loss"], record["train_keypoint_error_mm"], record["val_mpjpe_mm"],
-            record["val_kl"], record["elapsed_s"],
-        )
-        if progress is not None:
-            progress({"kind": "epoch", **record})
-
+    report = _epoch_reporter(config, held_out, body_model, start, history, progress)
     with torch_threads(threads):
         if workers == 1:
-            model = _optimise(train_clips, config, body_model, 0, 1, report)
+            model = _optimise(clips.train, config, body_model, 0, 1, report)
         else:
-            model = _optimise_with_workers(train_clips, config, body_model, workers, threads, report)
-        final = reconstruction_mpjpe_mm(model, val_windows, val_rest, body_model)
+            model = optimise_with_workers(_optimise, clips.train, config, body_model, workers, threads, report)
+        final = reconstruction_mpjpe_mm(model, held_out.windows, held_out.rest, body_model)
     return TrainedPrior(
         model=model,
         config=config,
         history=history,
         train_seconds=time.perf_counter() - start,
-        train_subjects=tuple(sorted(set(train_clips.subjects))),
-        held_out_subjects=tuple(sorted(set(val_clips.subjects))),
+        train_subjects=tuple(sorted(set(clips.train.subjects))),
+        held_out_subjects=tuple(sorted(set(clips.held_out.subjects))),
         held_out=final,
-        data_digest=all_clips.digest(),
-        num_train_frames=int(train_clips.starts[-1]),
+        data_digest=clips.all.digest(),
+        num_train_frames=int(clips.train.starts[-1]),
         train_cpu_seconds=time.process_time() - start_cpu,
     )
 
 
 def _optimise(
     train_clips: MotionClips, config: PriorConfig, body_model, rank: int, workers: int,
-    report: _EpochReport | None,
+    report: EpochReport | None,
 ) -> MotionVAE:
     """The optimisation loop of one worker (``rank`` of ``workers``; the only one when ``workers`` is 1).
 
@@ -312,7 +363,7 @@ def _optimise(
                 losses["total"].backward()
                 values = torch.stack([losses[name].detach() for name in _LOSS_NAMES])
                 if workers > 1:
-                    _average_over_workers([p.grad for p in model.parameters()] + [values], workers)
+                    average_over_workers([p.grad for p in model.parameters()] + [values], workers)
                 optimizer.step()
                 step += 1
                 for name, value in zip(_LOSS_NAMES, values.tolist()):
@@ -321,82 +372,3 @@ def _optimise(
                 report(epoch, step, lr, terms, model)
         model.eval()
     return model
-
-
-def _average_over_workers(tensors: list[torch.Tensor], workers: int) -> None:
-    """Replace each tensor, in place, by its mean over the workers (one all-reduce of them all, flattened)."""
-    flat = torch.cat([t.reshape(-1) for t in tensors])
-    dist.all_reduce(flat)
-    flat /= workers
-    offset = 0
-    for t in tensors:
-        t.copy_(flat[offset:offset + t.numel()].view_as(t))
-        offset += t.numel()
-
-
-def _optimise_with_workers(
-    train_clips: MotionClips, config: PriorConfig, body_model, workers: int, threads: int,
-    report: _EpochReport,
-) -> MotionVAE:
-    """:func:`_optimise` as worker 0 of ``workers``, the others spawned here and joined before returning.
-
-    Raises:
-        RuntimeError: a worker failed (its traceback in the message) or the exchange broke down.
-    """
-    folder = Path(tempfile.mkdtemp(prefix="humancal_prior_workers_"))
-    rendezvous = f"file://{folder / 'rendezvous'}"
-    spawned = torch_mp.start_processes(
-        _worker, args=(workers, rendezvous, train_clips, config, str(body_model.dtype), str(body_model.device),
-                       threads),
-        nprocs=workers - 1, join=False, start_method="spawn",
-    )
-    logger.info("training with %d workers of %d thread(s) each", workers, threads)
-    try:
-        try:
-            dist.init_process_group("gloo", init_method=rendezvous, rank=0, world_size=workers,
-                                    timeout=_WORKER_TIMEOUT)
-            try:
-                model = _optimise(train_clips, config, body_model, 0, workers, report)
-            finally:
-                dist.destroy_process_group()
-        except RuntimeError as err:  # torch.distributed's errors (a worker gone, a timeout) are RuntimeErrors
-            failure = _worker_failure(spawned)
-            detail = f"{err}" + (f"; a worker reported: {failure}" if failure else "")
-            raise RuntimeError(f"motion-prior training with {workers} workers failed: {detail}") from err
-        while not spawned.join():  # raises the error of a worker that failed after the last exchange
-            pass
-    finally:
-        for process in spawned.processes:
-            process.join(timeout=30)
-            if process.is_alive():
-                process.terminate()
-        shutil.rmtree(folder, ignore_errors=True)
-    return model
-
-
-def _worker_failure(spawned) -> str:
-    """The error of a spawned worker that died, or '' (waits up to 30 s for one to end)."""
-    try:
-        spawned.join(timeout=30)
-    except (torch_mp.ProcessRaisedException, torch_mp.ProcessExitedException) as err:  # with the worker's traceback
-        return str(err)
-    return ""
-
-
-def _worker(index: int, workers: int, rendezvous: str, train_clips: MotionClips, config: PriorConfig, dtype: str,
-            device: str, threads: int) -> None:
-    """Entry point of spawned worker ``index + 1``: its own body model, then :func:`_optimise` without reports.
-
-    It joins the group first, so that a failure after that (the body model, say) closes its connection and worker 0
-    stops at its next exchange instead of waiting out the timeout.
-    """
-    from humancal.body import BodyModel
-
-    torch.set_num_threads(threads)
-    dist.init_process_group("gloo", init_method=rendezvous, rank=index + 1, world_size=workers,
-                            timeout=_WORKER_TIMEOUT)
-    try:
-        body_model = BodyModel(dtype=getattr(torch, dtype.removeprefix("torch.")), device=device)
-        _optimise(train_clips, config, body_model, index + 1, workers, None)
-    finally:
-        dist.destroy_process_group()

@@ -32,7 +32,7 @@ def test_the_pipeline_defers_views_without_upright_people():
 def test_to_library_converts_and_validates():
     config = ExtrinsicsSettings(focal_range_rel=[0.2, 4.0], person_scale_std=None).to_library()
     assert config.focal_range_rel == (0.2, 4.0) and config.person_scale_std is None
-    with pytest.raises(ValueError, match="ExtrinsicsConfig.max_groups=2 must be >= 3"):
+    with pytest.raises(ValueError, match="ExtrinsicsConfig.max_groups must be an integer >= 3, got 2"):
         ExtrinsicsSettings(max_groups=2).to_library()
 
 

@@ -76,7 +76,7 @@ def pair_aucs(scene_inputs, rig) -> dict[str, float]:
 
 def test_same_person_pairs_score_higher(scene_inputs):
     auc = pair_aucs(scene_inputs, scene_inputs[2])
-    # measured: association 0.9981, epipolar_only 0.9977 (docs/association.md)
+    # measured: association 0.9981, epipolar_only 0.9977 (docs/results/association.md)
     assert auc["association"] > 0.98, auc
     assert auc["epipolar_only"] > 0.98, auc
 

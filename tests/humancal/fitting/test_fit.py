@@ -63,11 +63,11 @@ def test_views_must_match_the_cameras(body_model, scene_inputs):
 
 
 def test_global_stage_moves_only_the_roots_and_decodes_the_held_pose_once(body_model, scene_inputs):
-    from humancal.fitting.fit import _Problem, _run_stage
+    from humancal.fitting.problem import BodyFitProblem, run_stage
 
     scene, observations, rig = scene_inputs
     prior = shipped_prior()[0].to(dtype=body_model.dtype).eval()
-    problem = _Problem(body_model, observations, rig, prior, FAST)
+    problem = BodyFitProblem(body_model, observations, rig, prior, FAST)
     problem.encode_pose()
     latents, shape = problem.pose_params.detach().clone(), problem.shape_logit.detach().clone()
     decodes = []
@@ -76,7 +76,7 @@ def test_global_stage_moves_only_the_roots_and_decodes_the_held_pose_once(body_m
     try:
         with torch.no_grad():
             before = problem.terms("2d")["reprojection"]
-        terms = _run_stage(problem, "global", 3, None)
+        terms = run_stage(problem, "global", 3, None)
     finally:
         prior.decode = decode
     # one decoding for `before` and one for the whole stage (the held pose), however many evaluations its line
@@ -88,13 +88,13 @@ def test_global_stage_moves_only_the_roots_and_decodes_the_held_pose_once(body_m
 
 
 def test_latents_start_at_the_prior_mean_or_the_reference_pose(body_model, scene_inputs):
-    from humancal.fitting.fit import _Problem
+    from humancal.fitting.problem import BodyFitProblem
 
     scene, observations, rig = scene_inputs
     prior = shipped_prior()[0].to(dtype=body_model.dtype).eval()
     starts = {}
     for start in ("prior_mean", "reference_pose"):
-        problem = _Problem(body_model, observations, rig, prior, FAST.replace(latent_start=start))
+        problem = BodyFitProblem(body_model, observations, rig, prior, FAST.replace(latent_start=start))
         problem.encode_pose()
         assert problem.latent and problem.pose_params.requires_grad
         starts[start] = problem.pose_params.detach()
@@ -153,7 +153,7 @@ def test_half_rate_start_decodes_half_the_frames_and_fits_as_well(body_model, sc
 def test_a_person_unseen_on_the_half_rate_frames_keeps_its_own_start(body_model, scene_inputs):
     from dataclasses import replace
 
-    from humancal.fitting.fit import _Problem
+    from humancal.fitting.problem import BodyFitProblem
 
     scene, observations, rig = scene_inputs
     valid = observations.joints_valid.copy()
@@ -161,9 +161,9 @@ def test_a_person_unseen_on_the_half_rate_frames_keeps_its_own_start(body_model,
     observations = replace(observations, joints_valid=valid)
     prior = shipped_prior()[0].to(dtype=body_model.dtype).eval()
     config = FAST.replace(window_frames=16, window_overlap=4)
-    full = _Problem(body_model, observations, rig, prior, config)
+    full = BodyFitProblem(body_model, observations, rig, prior, config)
     full.encode_pose()
-    coarse = _Problem(body_model, observations.every_other_frame(), rig, prior, config, time_stride=2)
+    coarse = BodyFitProblem(body_model, observations.every_other_frame(), rig, prior, config, time_stride=2)
     coarse.encode_pose()
     with torch.no_grad():
         coarse.translation += 1.0  # as if the half-rate steps had moved every root by a metre

@@ -126,7 +126,7 @@ def test_shipped_prior_is_valid():
     model, info = shipped_prior()
     assert info["config"]["variant"] == "motion_prior" and model.latent_dim == 32
     # The issue asks for <= 15 mm; the shipped prior measures 14.1 mm on its 16-frame held-out windows
-    # (docs/motion_prior.md).
+    # (docs/results/motion_prior.md).
     assert info["held_out"]["mpjpe_mm"] <= 15.0
     assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
     assert len(info["history"]) == info["config"]["epochs"] + 1
@@ -136,7 +136,7 @@ def test_shipped_prior_is_valid():
 def test_shipped_per_frame_prior_is_valid_and_unknown_variants_are_refused():
     model, info = shipped_prior("per_frame")
     assert info["config"]["variant"] == "per_frame" and model.latent_dim == 32 and not model.config.temporal
-    assert info["held_out"]["mpjpe_mm"] <= 17.0  # measured 15.7 mm (docs/motion_prior.md)
+    assert info["held_out"]["mpjpe_mm"] <= 17.0  # measured 15.7 mm (docs/results/motion_prior.md)
     assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
     with pytest.raises(PriorWeightsError, match=r"no shipped weights of the prior variant 'bidirectional_lstm'"):
         shipped_prior("bidirectional_lstm")
@@ -148,13 +148,13 @@ def test_shipped_ablation_priors_are_valid(variant, measured_mm):
     assert variant in SHIPPED_VARIANT_STEMS
     model, info = shipped_prior(variant)
     assert info["config"]["variant"] == variant and model.config.temporal
-    assert info["held_out"]["mpjpe_mm"] <= measured_mm + 1.5  # docs/motion_prior.md
+    assert info["held_out"]["mpjpe_mm"] <= measured_mm + 1.5  # docs/results/motion_prior.md
     assert info["held_out_subjects"] == ["02", "14"] and not set(info["train_subjects"]) & {"02", "14"}
 
 
 REVERSAL_TOLERANCE_MM = 3.0
 """Mean keypoint distance allowed between decode(reversed latent) and the reversed decoding (shipped prior, on
-these procedural motions: measured 1.74 mm, and 1.93 mm when the reversed motion is encoded; docs/motion_prior.md).
+these procedural motions: measured 1.74 mm, and 1.93 mm when the reversed motion is encoded; docs/results/motion_prior.md).
 An exact equality cannot hold: the two GRU directions have their own weights; the reversal augmentation makes
 the prior nearly symmetric in time."""
 
