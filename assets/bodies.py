@@ -85,7 +85,7 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
             "scene": png_metadata(plot_fit_scene(body, result.motions, refined, Path(tmp) / "scene.png"),
                                   "the fitted people and the cameras in 3D"),
             "errors_per_view": png_metadata(plot_reprojection_errors(
-                fitted_keypoints(result.motions), refined.to_cameras(), detections, associations,
+                fitted_keypoints(result.motions), refined, detections, associations,
                 [f"view {v}" for v in range(len(refined))], Path(tmp) / "errors.png"),
                 "per-view reprojection error over time"),
         }

@@ -16,7 +16,7 @@ from evaluation.camera_metrics import camera_metrics_table
 from evaluation.lifter_metrics import lifter_metrics_table
 from evaluation.rig_plot import plot_rig_comparison
 from evaluation.sequence_metrics import sequence_metric_table
-from humancal.camera import Camera, cameras_from_table
+from humancal.camera import CameraRig, cameras_from_table
 from humancal.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
 from humancal.tables import empty_table
@@ -117,10 +117,10 @@ class MethodInputs:
     detections: pd.DataFrame
     associations: pd.DataFrame
     skeletons3d: pd.DataFrame
-    cameras: list[Camera]
+    cameras: CameraRig
     gt_associations: pd.DataFrame
     gt_poses3d: pd.DataFrame
-    gt_cameras: list[Camera]
+    gt_cameras: CameraRig
     gt_cameras_association: tuple[pd.DataFrame, pd.DataFrame, float]
 
 
@@ -148,7 +148,7 @@ def _body_rows(spec, inputs: MethodInputs, config: BodyFitSettings, body_model: 
         gt_cameras_association=inputs.gt_cameras_association)
 
 
-def _rig_pictures(key: str, estimated: list[Camera], refined_cameras: pd.DataFrame, gt: list[Camera],
+def _rig_pictures(key: str, estimated: CameraRig, refined_cameras: pd.DataFrame, gt: CameraRig,
                   raw_detections: pd.DataFrame, gt_associations: pd.DataFrame, regime: str) -> dict:
     """The estimated (and the refined) rig aligned to the true one, as metadata pictures."""
     pictures = {}

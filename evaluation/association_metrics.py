@@ -37,7 +37,7 @@ from evaluation.protocols import MetricRow, evaluate_canonical_poses, evaluate_s
 from humancal.association import AffinityConfig, TrackingConfig, associate, to_associations_table, to_skeletons_table
 from humancal.associations import Associations
 from humancal.calibration.alignment import align_rig
-from humancal.camera import Camera, CameraRig
+from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
 from humancal.lifter import LiftedPoses
 from humancal.sequences import SequenceSpec
@@ -139,7 +139,7 @@ _SEQUENCE_ALIGNED = {"pcp_avg": "pcp_avg_sequence_aligned", "mpjpe_mm": "mpjpe_s
 
 
 def skeletons_in_truth(estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,
-                       cameras: list[Camera], gt_cameras: list[Camera]) -> pd.DataFrame:
+                       cameras: CameraRig, gt_cameras: CameraRig) -> pd.DataFrame:
     """Estimated 3D keypoints as a ground-truth ``poses3d`` table: each skeleton takes, per frame, the true id of
     most of its detections (a true person claimed twice in a frame keeps the skeleton with more views), and moves
     into the ground-truth world by the similarity that aligns the estimated camera centres on the true ones.
@@ -177,7 +177,7 @@ def protocol_of(spec: SequenceSpec):
 
 
 def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.DataFrame, truth: pd.DataFrame,
-                     gt_poses3d: pd.DataFrame, cameras: list[Camera], gt_cameras: list[Camera]) -> list[MetricRow]:
+                     gt_poses3d: pd.DataFrame, cameras: CameraRig, gt_cameras: CameraRig) -> list[MetricRow]:
     """``mpjpe_mm`` and ``pcp_avg`` of the skeletons (ids mapped to the true ones per frame, aligned into the
     ground-truth world by the cameras' similarity: :func:`skeletons_in_truth`), by the dataset's protocol; and
     ``pcp_avg_sequence_aligned``, ``mpjpe_sequence_aligned_mm``: the same after one more similarity for the whole
@@ -193,13 +193,13 @@ def skeleton_metrics(spec: SequenceSpec, estimated: pd.DataFrame, skeletons: pd.
     return rows
 
 
-def associate_tables(dense: DenseDetections, lifted: LiftedPoses, cameras: list[Camera], sequence: str,
+def associate_tables(dense: DenseDetections, lifted: LiftedPoses, cameras: CameraRig, sequence: str,
                      affinity: AffinityConfig | None = None) -> tuple[pd.DataFrame, pd.DataFrame, float]:
     """The association of the lifted detections (``humancal.lifter.lifted_from_table`` of the ``detections``
     asset) with ``cameras``: its ``associations`` and ``skeletons3d`` tables and its run time, seconds. With the true
     cameras it is evaluation only."""
     start = time.perf_counter()
-    result = associate(dense, lifted, CameraRig.from_cameras(cameras), TrackingConfig(affinity=affinity or AffinityConfig()))
+    result = associate(dense, lifted, CameraRig.of(cameras), TrackingConfig(affinity=affinity or AffinityConfig()))
     return (to_associations_table(result, sequence), to_skeletons_table(result, sequence),
             time.perf_counter() - start)
 
@@ -212,10 +212,10 @@ def association_metric_table(
     seconds: float,
     dense: DenseDetections,
     lifted: LiftedPoses,
-    cameras: list[Camera],
+    cameras: CameraRig,
     gt_associations: pd.DataFrame,
     gt_poses3d: pd.DataFrame,
-    gt_cameras: list[Camera],
+    gt_cameras: CameraRig,
     failed_checks: str | None = None,
     gt_cameras_association: tuple[pd.DataFrame, pd.DataFrame, float] | None = None,
 ) -> pd.DataFrame:
@@ -233,7 +233,7 @@ def association_metric_table(
     """
     parts = []
 
-    def run(rig_cameras: list[Camera], affinity: AffinityConfig):
+    def run(rig_cameras: CameraRig, affinity: AffinityConfig):
         return associate_tables(dense, lifted, rig_cameras, spec.sequence, affinity)
 
     # method -> (associations, skeletons, seconds, cameras used, failed checks of those cameras)

@@ -27,7 +27,7 @@ from evaluation.camera_metrics import camera_metrics
 from evaluation.protocols import MetricRow, evaluate_reprojection, metrics_table
 from humancal.body import BodyModel
 from humancal.calibration.alignment import align_rig
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.fitting import FittedMotions
 from humancal.keypoints import CANONICAL_JOINTS
 from humancal.lifter import lifted_from_table
@@ -117,8 +117,8 @@ def _whole_sequence_owner(associations: pd.DataFrame, gt_associations: pd.DataFr
 
 
 def body_metric_rows(spec: SequenceSpec, *, motions: pd.DataFrame, fps: float, seconds: float,
-                     associations: pd.DataFrame, detections: pd.DataFrame, cameras: list[Camera],
-                     gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame, gt_cameras: list[Camera],
+                     associations: pd.DataFrame, detections: pd.DataFrame, cameras: CameraRig,
+                     gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame, gt_cameras: CameraRig,
                      gt_motions: pd.DataFrame | None = None, body: BodyModel | None = None) -> list[MetricRow]:
     """The figures of one body fit (module docstring).
 
@@ -150,8 +150,8 @@ def body_metric_rows(spec: SequenceSpec, *, motions: pd.DataFrame, fps: float, s
 
 
 def skeleton_accel_rows(spec: SequenceSpec, *, skeletons3d: pd.DataFrame, associations: pd.DataFrame, fps: float,
-                        cameras: list[Camera], gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
-                        gt_cameras: list[Camera]) -> list[MetricRow]:
+                        cameras: CameraRig, gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
+                        gt_cameras: CameraRig) -> list[MetricRow]:
     """The baseline's figures under the same protocol as the fits (``skeletons3d`` rows)."""
     in_truth = skeletons_in_truth(associations, skeletons3d, gt_associations, cameras, gt_cameras)
     rows = protocol_of(spec)(in_truth, gt_poses3d)
@@ -160,9 +160,9 @@ def skeleton_accel_rows(spec: SequenceSpec, *, skeletons3d: pd.DataFrame, associ
     return rows
 
 
-def camera_and_body_rows(spec: SequenceSpec, *, motions: pd.DataFrame, cameras: list[Camera], seconds: float,
+def camera_and_body_rows(spec: SequenceSpec, *, motions: pd.DataFrame, cameras: CameraRig, seconds: float,
                          associations: pd.DataFrame, detections: pd.DataFrame, gt_associations: pd.DataFrame,
-                         gt_poses3d: pd.DataFrame, gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
+                         gt_poses3d: pd.DataFrame, gt_cameras: CameraRig, gt_motions: pd.DataFrame | None,
                          body: BodyModel, fps: float, with_cameras: bool) -> list[MetricRow]:
     """The body rows of one fit (its reprojection error named ``fit_reprojection_error_px``) and, with
     ``with_cameras``, the camera rows of the cameras it ended with."""
@@ -180,10 +180,10 @@ PIPELINE_METHOD = {"int_ext": "int_ext", "ext": "ext_init_focal", "fixed": "init
 
 
 def pipeline_body_table(spec: SequenceSpec, *, body: BodyModel, regime: str, fps: float, fitted_motions: pd.DataFrame,
-                        refined_cameras: list[Camera], fit_seconds: float, associations: pd.DataFrame,
+                        refined_cameras: CameraRig, fit_seconds: float, associations: pd.DataFrame,
                         skeletons3d: pd.DataFrame, lifted_detections: pd.DataFrame, detections: pd.DataFrame,
-                        cameras: list[Camera], gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
-                        gt_cameras: list[Camera], gt_motions: pd.DataFrame | None,
+                        cameras: CameraRig, gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
+                        gt_cameras: CameraRig, gt_motions: pd.DataFrame | None,
                         failed_checks: str | None = None,
                         gt_cameras_association: tuple[pd.DataFrame, pd.DataFrame, float] | None = None
                         ) -> pd.DataFrame:

@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
 from evaluation.camera_metrics import CameraErrors, camera_errors
-from humancal.camera import Camera, project_points
+from humancal.camera import Camera, CameraRig, project_points
 
 __all__ = ["self_calibration_floor"]
 
@@ -42,7 +42,7 @@ def _convention_intrinsics(camera: Camera, centred_principal_point: bool, square
 
 
 def self_calibration_floor(
-    ground_truth: list[Camera],
+    ground_truth: CameraRig,
     points_world_m: np.ndarray,
     *,
     centred_principal_point: bool = True,
@@ -101,7 +101,7 @@ def self_calibration_floor(
     n_focal = 0 if not free_focal else 1 if square_pixels else 2  # log scales: one focal, or fx and fy
     n_cam = 6 + n_focal + int(free_k1)
 
-    def cameras_of(x: np.ndarray) -> list[Camera]:
+    def cameras_of(x: np.ndarray) -> CameraRig:
         params = x[:n_cam * V].reshape(V, n_cam)
         out = []
         for v, cam in enumerate(ground_truth):
@@ -114,7 +114,7 @@ def self_calibration_floor(
                 distortion[0] += params[v, -1]
             out.append(Camera(K, cv2.Rodrigues(params[v, :3])[0], params[v, 3:6].copy(), cam.width_px,
                               cam.height_px, distortion))
-        return out
+        return CameraRig.from_cameras(out)
 
     def residuals(x: np.ndarray) -> np.ndarray:
         points = x[n_cam * V:].reshape(N, 3)

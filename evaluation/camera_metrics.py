@@ -34,7 +34,7 @@ import pandas as pd
 from evaluation.protocols import MetricRow, metrics_table
 from humancal.associations import Associations
 from humancal.calibration.alignment import Similarity, align_rig
-from humancal.camera import Camera
+from humancal.camera import Camera, CameraRig
 from humancal.detections import detections_to_dense
 from humancal.geometry.rotations import rotation_distance_deg
 from humancal.geometry.triangulation import reprojection_errors_px, triangulate_dlt
@@ -49,7 +49,7 @@ class CameraErrors(dict):
     """Per-view arrays ``focal_error_pct``, ``position_error_mm``, ``angle_error_deg`` and the ``alignment``."""
 
 
-def camera_errors(estimated: list[Camera], ground_truth: list[Camera]) -> CameraErrors:
+def camera_errors(estimated: CameraRig, ground_truth: CameraRig) -> CameraErrors:
     """Focal, position and angle errors of every view after the similarity alignment of the centres.
 
     Returns:
@@ -75,7 +75,7 @@ def scale_error_pct(alignment: Similarity) -> float:
     return float(100.0 * (1.0 / alignment.scale - 1.0))
 
 
-def centred_principal_point_floor(ground_truth: list[Camera], points_world_m: np.ndarray) -> dict[str, np.ndarray]:
+def centred_principal_point_floor(ground_truth: CameraRig, points_world_m: np.ndarray) -> dict[str, np.ndarray]:
     """The camera errors that holding the principal point at the image centre causes by itself.
 
     Each true camera's intrinsics get their principal point moved to the image centre (``width/2, height/2``; focal and
@@ -116,7 +116,7 @@ def centred_principal_point_floor(ground_truth: list[Camera], points_world_m: np
 
 
 def reprojection_errors_per_view(
-    cameras: list[Camera], detections: pd.DataFrame, associations: pd.DataFrame, min_score: float = 0.0
+    cameras: CameraRig, detections: pd.DataFrame, associations: pd.DataFrame, min_score: float = 0.0
 ) -> np.ndarray:
     """Mean reprojection error per view of the people triangulated (per frame) with ``cameras``.
 
@@ -159,8 +159,8 @@ def _rows(name: str, values: np.ndarray, unit: str) -> list[MetricRow]:
 
 
 def camera_metrics(
-    estimated: list[Camera],
-    ground_truth: list[Camera],
+    estimated: CameraRig,
+    ground_truth: CameraRig,
     detections: pd.DataFrame | None = None,
     associations: pd.DataFrame | None = None,
 ) -> list[MetricRow]:
@@ -190,8 +190,8 @@ def camera_metrics(
 def camera_metrics_table(
     dataset: str,
     sequence: str,
-    estimated: list[Camera],
-    ground_truth: list[Camera],
+    estimated: CameraRig,
+    ground_truth: CameraRig,
     detections: pd.DataFrame | None = None,
     associations: pd.DataFrame | None = None,
     method: str = METHOD,

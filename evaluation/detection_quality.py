@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.datasets.gt_matching import match_ground_truth
 from humancal.tables import validate_table
 
@@ -59,7 +59,7 @@ class GroupingEvaluation:
 def evaluate_grouping(
     detections: pd.DataFrame,
     gt_poses: pd.DataFrame,
-    cameras: Sequence[Camera],
+    cameras: CameraRig,
     *,
     dataset: str,
     method: str = "grouping",

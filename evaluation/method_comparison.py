@@ -92,18 +92,18 @@ METHODS: dict[str, Method] = {
 """Every method of the module docstring."""
 
 
-def _with_true_intrinsics(cameras: list[Camera], gt_cameras: list[Camera]) -> list[Camera]:
-    return [Camera(g.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, g.distortion)
-            for c, g in zip(cameras, gt_cameras)]
+def _with_true_intrinsics(cameras: CameraRig, gt_cameras: CameraRig) -> CameraRig:
+    return CameraRig.from_cameras([Camera(g.K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px,
+                                          g.distortion) for c, g in zip(cameras, gt_cameras)])
 
 
-def _with_true_principal_points(cameras: list[Camera], gt_cameras: list[Camera]) -> list[Camera]:
+def _with_true_principal_points(cameras: CameraRig, gt_cameras: CameraRig) -> CameraRig:
     moved = []
     for c, g in zip(cameras, gt_cameras):
         K = c.K.copy()
         K[:2, 2] = g.K[:2, 2]
         moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
-    return moved
+    return CameraRig.from_cameras(moved)
 
 
 def _true_joints_m(gt_poses3d: pd.DataFrame) -> np.ndarray:
@@ -116,8 +116,8 @@ def _true_joints_m(gt_poses3d: pd.DataFrame) -> np.ndarray:
 def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Callable[[str], MotionVAE | None],
                         body: BodyModel, config: BodyFitConfig, fps: float, dense: DenseDetections,
                         lifted: LiftedPoses, detections: pd.DataFrame, associations: pd.DataFrame, skeletons3d: pd.DataFrame,
-                        cameras: list[Camera], gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
-                        gt_cameras: list[Camera], gt_motions: pd.DataFrame | None, failed_checks: str | None = None,
+                        cameras: CameraRig, gt_associations: pd.DataFrame, gt_poses3d: pd.DataFrame,
+                        gt_cameras: CameraRig, gt_motions: pd.DataFrame | None, failed_checks: str | None = None,
                         log: Callable[[str], None] | None = None) -> pd.DataFrame:
     """Fit and score each of ``methods`` (keys of :data:`METHODS`) on one sequence.
 
@@ -155,7 +155,7 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
         people, skeletons, used, failed = associations, skeletons3d, cameras, failed_checks
         if method.cameras == "gt":
             if gt_association is None:
-                result = associate(dense, lifted, CameraRig.from_cameras(gt_cameras))
+                result = associate(dense, lifted, CameraRig.of(gt_cameras))
                 gt_association = (to_associations_table(result, spec.sequence),
                                   to_skeletons_table(result, spec.sequence))
             (people, skeletons), used, failed = gt_association, gt_cameras, None
@@ -164,7 +164,7 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
         elif method.cameras == "gt_principal_point":
             used = _with_true_principal_points(cameras, gt_cameras)
         observations, _ = body_observations(dense, people, skeletons, len(used))
-        rig = CameraRig.from_cameras(used)
+        rig = CameraRig.of(used)
         if method.cameras == "bundle":
             rig = bundle_adjust(observations, rig, config, regime="int_ext").cameras
         fit = fit_bodies(body, observations, rig, prior,
@@ -172,7 +172,7 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
         seconds = time.perf_counter() - start
         say(f"{name}: {seconds:.1f} s")
         rows = camera_and_body_rows(
-            spec, motions=fit.motions.to_table(spec.sequence), cameras=fit.cameras.to_cameras(), seconds=seconds,
+            spec, motions=fit.motions.to_table(spec.sequence), cameras=fit.cameras, seconds=seconds,
             associations=people, detections=detections, gt_associations=gt_associations, gt_poses3d=gt_poses3d,
             gt_cameras=gt_cameras, gt_motions=gt_motions, body=body, fps=fps,
             with_cameras=method.cameras in ("gt_intrinsics", "gt_principal_point", "bundle") or method.regime != "fixed")

@@ -29,7 +29,7 @@ import pandas as pd
 
 from humancal.associations import Associations
 from humancal.calibration.types import ankle_midpoints, hip_midpoints
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.detections import DenseDetections, detections_to_dense
 from humancal.geometry.rotations import angle_between_deg, axis_angle_to_rotmat
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX
@@ -103,7 +103,7 @@ def _random_rotations(n: int, std_deg: float, rng: np.random.Generator) -> np.nd
 def lift_ground_truth(
     keypoints_world_m: np.ndarray,
     height_m: np.ndarray,
-    cameras: list[Camera] | tuple[Camera, ...],
+    cameras: CameraRig,
     frame: np.ndarray,
     view: np.ndarray,
     person_id: np.ndarray,
@@ -211,7 +211,7 @@ def stand_in_lifted_poses(
 
 def stand_in_from_matches(
     detections: pd.DataFrame,
-    cameras: list[Camera] | tuple[Camera, ...],
+    cameras: CameraRig,
     keypoints_world_m: np.ndarray,
     height_m: np.ndarray,
     matches: pd.DataFrame,

@@ -14,7 +14,7 @@ import pandas as pd
 
 from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm, pcp_correct
 from humancal.associations import Associations
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.detections import detections_to_dense
 from humancal.formats import SKELETONS, from_canonical
 from humancal.geometry.alignment import fit_similarity
@@ -136,7 +136,7 @@ def evaluate_canonical_poses(pred: pd.DataFrame, gt: pd.DataFrame, sequence_alig
 
 
 def evaluate_reprojection(
-    poses: pd.DataFrame, detections: pd.DataFrame, associations: pd.DataFrame, cameras: list[Camera]
+    poses: pd.DataFrame, detections: pd.DataFrame, associations: pd.DataFrame, cameras: CameraRig
 ) -> list[MetricRow]:
     """2D reprojection error of canonical 3D poses against the detections assigned to each person.
 

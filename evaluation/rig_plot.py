@@ -9,7 +9,7 @@ import pandas as pd
 
 from humancal.baselines import triangulate_identified
 from humancal.calibration import plot_rigs
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 
 __all__ = ["people_floor_points_m", "plot_rig_comparison"]
 
@@ -17,7 +17,7 @@ _ANKLES = ("left_ankle", "right_ankle")
 
 
 def people_floor_points_m(
-    cameras: list[Camera], detections: pd.DataFrame, associations: pd.DataFrame, max_points: int = 3000,
+    cameras: CameraRig, detections: pd.DataFrame, associations: pd.DataFrame, max_points: int = 3000,
     max_frames: int = 300,
 ) -> np.ndarray:
     """Floor positions (ankle midpoint with z = 0) of the identified people triangulated with ``cameras``, in at
@@ -42,8 +42,8 @@ def people_floor_points_m(
 
 
 def plot_rig_comparison(
-    estimated: list[Camera],
-    ground_truth: list[Camera],
+    estimated: CameraRig,
+    ground_truth: CameraRig,
     detections: pd.DataFrame,
     associations: pd.DataFrame,
     path_png: str | Path,

@@ -6,7 +6,7 @@ import pandas as pd
 
 from evaluation.detection_quality import evaluate_grouping
 from evaluation.protocols import evaluate_canonical_poses, evaluate_reprojection, evaluate_shelf_poses, metrics_table
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.sequences import SequenceSpec
 
 __all__ = ["baseline_metrics", "sequence_metric_table"]
@@ -17,7 +17,7 @@ def baseline_metrics(
     poses: pd.DataFrame,
     detections: pd.DataFrame,
     associations: pd.DataFrame,
-    cameras: list[Camera],
+    cameras: CameraRig,
     gt_poses3d: pd.DataFrame,
     method: str = "gt_camera_triangulation",
 ) -> pd.DataFrame:
@@ -38,7 +38,7 @@ def sequence_metric_table(
     gt_camera_triangulation: pd.DataFrame,
     detections: pd.DataFrame,
     associations: pd.DataFrame,
-    cameras: list[Camera],
+    cameras: CameraRig,
     gt_poses3d: pd.DataFrame,
 ) -> pd.DataFrame:
     """All rows of a sequence's metric table.

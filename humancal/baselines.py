@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from humancal.associations import Associations
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.config import Config, at_least, in_range, positive
 from humancal.detections import detections_to_dense
 from humancal.geometry.triangulation import triangulate_dlt
@@ -44,7 +44,7 @@ class TriangulationConfig(Config):
 def triangulate_identified(
     detections: pd.DataFrame,
     associations: pd.DataFrame,
-    cameras: list[Camera],
+    cameras: CameraRig,
     sequence: str,
     config: TriangulationConfig = TriangulationConfig(),
 ) -> pd.DataFrame:
@@ -53,7 +53,7 @@ def triangulate_identified(
     Args:
         detections: canonical ``detections`` table.
         associations: canonical ``associations`` table (person_id -1 = not a person: skipped).
-        cameras: one camera per view (view index = list index).
+        cameras: the rig, one camera per view.
         sequence: value of the ``sequence`` column of the output.
         config: thresholds.
 

@@ -228,13 +228,13 @@ def _load_shelf(spec: SequenceSpec, folder: Path) -> SequenceInputs:
     from humancal.datasets.shelf import load_shelf
 
     shelf = load_shelf(folder)
-    cameras = cameras_to_table(list(shelf.cameras), spec.sequence)
+    cameras = cameras_to_table(shelf.cameras, spec.sequence)
     detections = shelf.detections.assign(sequence=spec.sequence)
     gt_poses = shelf.gt_poses.assign(sequence=spec.sequence)
     # Shelf does not say who each detection is; for evaluation and the identified baselines, a detection
     # is the ground-truth person it matches (one-to-one per view and frame, mean joint error under 5 % of
     # the image diagonal), otherwise -1.
-    matched = match_ground_truth(detections, gt_poses, list(shelf.cameras)).person_views
+    matched = match_ground_truth(detections, gt_poses, shelf.cameras).person_views
     matched = matched[matched["det_id"] >= 0]
     ids = detections[["sequence", "frame", "view", "det_id"]].drop_duplicates()
     ids = ids.merge(matched[["frame", "view", "det_id", "person_id"]], on=["frame", "view", "det_id"], how="left")

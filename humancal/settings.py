@@ -3,7 +3,7 @@
 Two settings, both environment variables so that a notebook, the CLI and Dagster agree:
 
 ``HUMANCAL_DATA_DIR``
-    Root of external datasets (CMU mocap, Shelf, Human3.6M cameras; see ``docs/data.md``).
+    Root of external datasets (CMU mocap, Shelf, Human3.6M cameras; see the README's "Data" section).
     Default: ``../shared/data`` beside the repository checkout, when that folder exists.
 ``HUMANCAL_STATE_DIR``
     humancal's own state: materialized artifacts, the Dagster instance, the body-model cache.

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.geometry.alignment import Similarity, fit_similarity
 
 __all__ = ["Similarity", "rig_alignment_points", "align_rig"]
 
 
-def rig_alignment_points(cameras: list[Camera], length: float, with_axes: bool = False) -> np.ndarray:
+def rig_alignment_points(cameras: CameraRig, length: float, with_axes: bool = False) -> np.ndarray:
     """Camera centres, plus (for fewer than three cameras, or ``with_axes``) a point ``length`` ahead on each
     optical axis.
 
@@ -29,7 +29,7 @@ def rig_alignment_points(cameras: list[Camera], length: float, with_axes: bool =
     return np.concatenate([centres, ahead])
 
 
-def align_rig(estimated: list[Camera], reference: list[Camera]) -> Similarity:
+def align_rig(estimated: CameraRig, reference: CameraRig) -> Similarity:
     """Similarity mapping the estimated rig's world onto the reference world, fitted on the camera centres.
 
     For two cameras, points on the optical axes at the baseline length of each rig are added (see

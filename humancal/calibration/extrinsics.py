@@ -51,7 +51,7 @@ from humancal.calibration.bundle import focal_bounds_from_fov
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted, hip_midpoints
 from humancal.calibration.view_repair import RepairInputs, calibration_adjuster, check_and_repair_views
 from humancal.calibration.world_scale import body_size_ratio, people_scale_factor
-from humancal.camera import Camera
+from humancal.camera import Camera, CameraRig
 from humancal.detections import DenseDetections
 from humancal.lifter.pose_cues import standing_score
 
@@ -136,7 +136,7 @@ def estimate_extrinsics(
     view_names = _checked_view_names(view_names, V)
     known = dict(known or {})
     if sorted(known) == list(range(V)):
-        return known_rig_estimate(detections, lifted, [known[v] for v in range(V)], config)
+        return known_rig_estimate(detections, lifted, CameraRig.from_cameras([known[v] for v in range(V)]), config)
     if known:
         intrinsics = with_known_intrinsics(intrinsics, known)
     rng = np.random.default_rng(config.seed)

@@ -12,7 +12,7 @@ import pandas as pd
 from humancal.calibration.floor import FloorAlignment
 from humancal.calibration.lens import LensChoice
 from humancal.calibration.view_agreement import AgreementConfig
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.config import Config, at_least, in_range, positive
 
 __all__ = ["ExtrinsicsConfig", "ExtrinsicsDiagnostics", "ExtrinsicsEstimate"]
@@ -31,14 +31,13 @@ class ExtrinsicsConfig(Config):
         min_pair_support: a view pair needs this many supporting detections to be an edge.
         linear_iterations: passes of (root positions, linear focal + translation solve).
         linear_max_rel_std: a view whose linear focal has a larger data-only relative std is resected instead.
-        single_view_min_rel_std: floor on the prior std of well-conditioned single-view focal lengths. 0.3: on the
-            stress sweep's synthetic scenes (portrait images, cameras near the horizon or steeply down) 4 of the 13
-            single-view focal lengths that claimed to be good were 12-54 % off, and a 5 % prior dragged the bundle
-            adjustment after them; the views' multi-view data decide, the single-view value mainly starts them.
+        single_view_min_rel_std: floor on the prior std of well-conditioned single-view focal lengths: a loose
+            prior, so that the views' multi-view data decide and the single-view value mainly starts them
+            (why 0.3: the CHANGELOG, "the stress sweep, three lifters").
         focal_range_rel: allowed focal range, multiples of the image diagonal (clips the initial values).
         max_groups: matched groups used by the bundle adjustment (spread over the sequence).
         shape_std_m: std of the lifted joints in the bundle adjustment, metres (chosen on seeded synthetic scenes
-            with the shipped lifter, docs/calibration.md).
+            with the shipped lifter, ``docs/results/calibration.md``).
         person_scale_std: relative std of a lifted person's size (a lifter sees body proportions, not size): the
             linear solve and the bundle adjustment estimate a size correction per matched pair / group with this
             prior, so that people's size errors do not distort the rig; None: sizes taken as lifted.
@@ -208,5 +207,5 @@ class ExtrinsicsDiagnostics:
 class ExtrinsicsEstimate:
     """Calibrated cameras (intrinsics refined by the multi-view step) and diagnostics."""
 
-    cameras: list[Camera]
+    cameras: CameraRig
     diagnostics: ExtrinsicsDiagnostics

@@ -20,7 +20,7 @@ from humancal.calibration.rotation_consensus import average_rotations, pairwise_
 from humancal.calibration.translations import root_positions, solve_focals_translations
 from humancal.calibration.types import CalibrationError, LiftedPoses
 from humancal.calibration.view_graph import check_view_graph
-from humancal.camera import Camera, intrinsic_matrices
+from humancal.camera import Camera, CameraRig, intrinsic_matrices
 from humancal.detections import DenseDetections
 
 __all__ = ["LinearStart", "Problem", "blind_view_start", "camera_matrices", "cameras_of", "initial_points",
@@ -238,8 +238,10 @@ def initial_points(groups, lifted, roots_T, view, R, t):
     return pts
 
 
-def cameras_of(ba, R_cam_from_world, t_cam_from_world_m, pp, distortion, intrinsics) -> list[Camera]:
+def cameras_of(ba, R_cam_from_world, t_cam_from_world_m, pp, distortion, intrinsics) -> CameraRig:
     """The bundle adjustment's focal lengths with the given extrinsics, principal points (V, 2) and lens distortion
-    (V, 5), as cameras of the views' image sizes."""
-    return [Camera(camera_matrices([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], R_cam_from_world[v], t_cam_from_world_m[v],
-                   e.width_px, e.height_px, distortion[v]) for v, e in enumerate(intrinsics)]
+    (V, 5), as the rig of cameras of the views' image sizes."""
+    return CameraRig.from_cameras([
+        Camera(camera_matrices([ba.fx_px[v]], [ba.fy_px[v]], pp[v : v + 1])[0], R_cam_from_world[v],
+               t_cam_from_world_m[v], e.width_px, e.height_px, distortion[v])
+        for v, e in enumerate(intrinsics)])

@@ -21,7 +21,7 @@ from humancal.calibration.view_agreement import (
     person_clusters,
 )
 from humancal.calibration.lens import undistorted_detections
-from humancal.camera import Camera, CameraRig, pinhole
+from humancal.camera import CameraRig, pinhole
 from humancal.detections import DenseDetections
 
 __all__ = ["FinalCameras", "choose_final_cameras", "FINAL_SOURCES"]
@@ -82,9 +82,9 @@ def choose_final_cameras(initial: CameraRig, refined: CameraRig | None, detectio
                                                     "other views place", again)
 
 
-def _pinhole_image(rig: CameraRig, detections: DenseDetections) -> tuple[list[Camera], DenseDetections]:
+def _pinhole_image(rig: CameraRig, detections: DenseDetections) -> tuple[CameraRig, DenseDetections]:
     """The rig's cameras as pinholes and the detections moved to their pinhole images (the agreement's geometry
     is a pinhole's); the rig and detections as given when no lens distorts."""
     if not np.any(rig.distortion):
-        return rig.to_cameras(), detections
-    return [pinhole(c) for c in rig.to_cameras()], undistorted_detections(detections, rig.K, rig.distortion)
+        return rig, detections
+    return CameraRig.from_cameras([pinhole(c) for c in rig]), undistorted_detections(detections, rig.K, rig.distortion)

@@ -29,7 +29,7 @@ from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.types import hip_midpoints
 from humancal.calibration.view_agreement import view_agreement
 from humancal.calibration.world_scale import body_size_ratio
-from humancal.camera import Camera
+from humancal.camera import Camera, CameraRig
 from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
 
@@ -82,14 +82,14 @@ def anchor_to_known(ba: BundleResult, known: Mapping[int, Camera], adjust, group
     return adjust(f, R, t, points, groups, hold_views=views)
 
 
-def known_rig_estimate(detections: DenseDetections, lifted: LiftedPoses, cameras: Sequence[Camera],
+def known_rig_estimate(detections: DenseDetections, lifted: LiftedPoses, cameras: CameraRig,
                        config: ExtrinsicsConfig) -> ExtrinsicsEstimate:
     """Every view known: the cameras as given, with the diagnostics of their agreement with the people.
 
     Args:
         detections: the detections (undistorted where the known lenses distort).
         lifted: their lifted poses (crop or camera frames).
-        cameras: one known camera per view (pinholes).
+        cameras: the known rig, one camera per view (pinholes).
         config: the calibration's settings (the agreement's thresholds, the frames matched).
     """
     found = regroup_with_cameras(detections, lifted, cameras, config.regroup_max_frames or 150)
@@ -112,4 +112,4 @@ def known_rig_estimate(detections: DenseDetections, lifted: LiftedPoses, cameras
         per_view, pd.DataFrame(columns=["view_a", "view_b", "support", "residual_deg"]), group_table, None,
         float("nan"), world_frame="known_cameras", people_world_m=hip_midpoints(found.points_world_m),
         body_size_ratio=body_size_ratio(found.points_world_m, lifted, found.groups))
-    return ExtrinsicsEstimate(list(cameras), diagnostics)
+    return ExtrinsicsEstimate(CameraRig.of(cameras), diagnostics)

@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 
 from humancal.calibration.alignment import align_rig
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.plotting import pyplot, save_figure
 
 __all__ = ["plot_rigs"]
 
 
-def _draw(ax, cameras: list[Camera], axes: tuple[int, int], color: str, label: str, length: float) -> None:
+def _draw(ax, cameras: CameraRig, axes: tuple[int, int], color: str, label: str, length: float) -> None:
     centres = np.stack([c.center_world_m for c in cameras])
     ax.scatter(centres[:, axes[0]], centres[:, axes[1]], c=color, marker="^", s=40, label=label, zorder=3)
     for v, (c, p) in enumerate(zip(cameras, centres)):
@@ -24,8 +24,8 @@ def _draw(ax, cameras: list[Camera], axes: tuple[int, int], color: str, label: s
 
 
 def plot_rigs(
-    estimated: list[Camera],
-    ground_truth: list[Camera] | None,
+    estimated: CameraRig,
+    ground_truth: CameraRig | None,
     floor_points: np.ndarray | None,
     path_png: str | Path,
     *,
@@ -37,8 +37,8 @@ def plot_rigs(
     brought onto it by the similarity of the camera centres (:func:`~humancal.calibration.alignment.align_rig`).
 
     Args:
-        estimated: the calibrated cameras.
-        ground_truth: the true cameras (same views) or None.
+        estimated: the calibrated rig.
+        ground_truth: the true rig (same views) or None.
         floor_points: (N, 3) people's floor positions in the estimated world, metres (or None).
         path_png: output file.
         title: figure title.
@@ -48,11 +48,12 @@ def plot_rigs(
     """
     plt = pyplot()
 
-    est = list(estimated)
+    est = CameraRig.of(estimated)
+    truth = None if ground_truth is None else CameraRig.of(ground_truth)
     points = None if floor_points is None else np.asarray(floor_points, dtype=np.float64).reshape(-1, 3)
-    if ground_truth is not None:
-        sim = align_rig(est, list(ground_truth))
-        est = [sim.apply_to_camera(c) for c in est]
+    if truth is not None:
+        sim = align_rig(est, truth)
+        est = CameraRig.from_cameras([sim.apply_to_camera(c) for c in est])
         points = None if points is None else sim.apply(points)
     centres = np.stack([c.center_world_m for c in est])
     length = 0.15 * float(np.ptp(centres[:, :2], axis=0).max() or 1.0)
@@ -60,9 +61,9 @@ def plot_rigs(
     for ax, dims, name in ((axes[0], (0, 1), "top view (x, y)"), (axes[1], (0, 2), "side view (x, z)")):
         if points is not None and len(points):
             ax.scatter(points[:, dims[0]], points[:, dims[1]], s=2, c="0.6", alpha=0.5, label="people on the floor")
-        if ground_truth is not None:
-            _draw(ax, list(ground_truth), dims, "tab:green", "ground truth", length)
-        _draw(ax, est, dims, "tab:red", "estimated" + (" (aligned)" if ground_truth is not None else ""), length)
+        if truth is not None:
+            _draw(ax, truth, dims, "tab:green", "ground truth", length)
+        _draw(ax, est, dims, "tab:red", "estimated" + (" (aligned)" if truth is not None else ""), length)
         ax.set_title(name)
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]" if dims[1] == 1 else "z [m]")

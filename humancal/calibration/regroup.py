@@ -16,13 +16,12 @@ track.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from humancal.association import SmoothingConfig, TrackingConfig, associate
-from humancal.camera import Camera, CameraRig
+from humancal.camera import CameraRig
 from humancal.detections import DenseDetections
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
@@ -54,14 +53,14 @@ class Regrouping:
         return int(sum(len(g) for g in self.groups))
 
 
-def regroup_with_cameras(detections: DenseDetections, lifted: LiftedPoses, cameras: Sequence[Camera],
+def regroup_with_cameras(detections: DenseDetections, lifted: LiftedPoses, cameras: CameraRig,
                          max_frames: int = 150) -> Regrouping:
     """Match the detections across views with known cameras; one group per person and frame.
 
     Args:
         detections: D detections of one sequence.
         lifted: their lifted poses (row-aligned; crop or camera frames).
-        cameras: the cameras, one per view, in the world frame of the result.
+        cameras: the rig, one camera per view, in the world frame of the result.
         max_frames: at most this many frames are matched, spread evenly over the sequence (the bundle
             adjustment uses a few hundred groups; matching every frame of a long capture would cost time for
             nothing).
@@ -84,7 +83,7 @@ def regroup_with_cameras(detections: DenseDetections, lifted: LiftedPoses, camer
     # clusters only: no temporal re-matching, no smoothing, no track rejected or merged
     config = TrackingConfig(temporal=False, smoothing=SmoothingConfig(enabled=False), min_track_s=0.0,
                             stitch_window_s=0.0)
-    result = associate(subset, lifted.subset(rows), CameraRig.from_cameras(list(cameras)), config)
+    result = associate(subset, lifted.subset(rows), CameraRig.of(cameras), config)
     skeleton = {(int(f), int(p)): i for i, (f, p) in enumerate(zip(result.skeleton_frame, result.skeleton_person))}
     kept = np.flatnonzero(result.person_id >= 0)
     if len(kept) == 0:

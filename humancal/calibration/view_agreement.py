@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from humancal.camera import Camera
+from humancal.camera import Camera, CameraRig
 from humancal.config import Config, at_least, in_range, positive
 from humancal.detections import DenseDetections
 from humancal.geometry.triangulation import triangulate_dlt
@@ -83,7 +83,7 @@ def groups_by_view(groups: Sequence[np.ndarray], view: np.ndarray, num_views: in
 
 
 def view_agreement(
-    cameras: Sequence[Camera],
+    cameras: CameraRig,
     detections: DenseDetections,
     groups: Sequence[np.ndarray],
     config: AgreementConfig | None = None,
@@ -93,7 +93,7 @@ def view_agreement(
     """Score every view against the people triangulated without it (see the module docstring).
 
     Args:
-        cameras: V cameras, one per view (pinholes: undistort the detections first if the lenses distort).
+        cameras: the rig of V cameras, one per view (pinholes: undistort the detections first if the lenses distort).
         detections: the detections the groups index (rows).
         groups: cross-view groups, each an array of detection rows of one person in one frame.
         config: thresholds; defaults to :class:`AgreementConfig`.
@@ -126,7 +126,8 @@ def _keypoint_sigma_px(keypoints_px: np.ndarray) -> np.ndarray:
     return np.maximum(0.02 * np.nan_to_num(size), 1.0)
 
 
-def _triangulate(others: list[int], cameras, detections: DenseDetections, table: np.ndarray, min_score: float):
+def _triangulate(others: list[int], cameras: CameraRig, detections: DenseDetections, table: np.ndarray,
+                min_score: float):
     """(G, 23, 3) the groups' keypoints triangulated from their detections in ``others`` (NaN where fewer than
     two confident observations)."""
     G = len(table)
@@ -141,7 +142,7 @@ def _triangulate(others: list[int], cameras, detections: DenseDetections, table:
         index = (np.flatnonzero(present)[:, None] * NUM_JOINTS + np.arange(NUM_JOINTS)).reshape(-1)
         points[k, index] = detections.keypoints_px[rows].reshape(-1, 2)
         weights[k, index] = np.where(scores >= min_score, scores, 0.0).reshape(-1)
-    X, _ = triangulate_dlt([cameras[u] for u in others], points, weights)
+    X, _ = triangulate_dlt(CameraRig.from_cameras([cameras[u] for u in others]), points, weights)
     return X.reshape(G, NUM_JOINTS, 3)
 
 
@@ -261,7 +262,7 @@ def person_clusters(detections: DenseDetections, person_id: np.ndarray, max_fram
     return [c for c in np.split(rows, cuts) if len(np.unique(detections.view[c])) >= 2]
 
 
-def agreement_with_people(cameras: Sequence[Camera], detections: DenseDetections, person_id: np.ndarray,
+def agreement_with_people(cameras: CameraRig, detections: DenseDetections, person_id: np.ndarray,
                           config: AgreementConfig | None = None, max_frames: int = 60) -> pd.DataFrame:
     """:func:`view_agreement` of a rig judged by the people of an association (e.g. the cameras a body fit refined,
     with the association they were fitted to): its clusters are both the groups and the people."""
@@ -277,7 +278,7 @@ def _badness(row, config: AgreementConfig) -> float:
                np.nan_to_num(row.behind_fraction) / max(config.max_behind, 1e-3))
 
 
-def isolate_disagreeing_views(cameras: Sequence[Camera], detections: DenseDetections, groups: Sequence[np.ndarray],
+def isolate_disagreeing_views(cameras: CameraRig, detections: DenseDetections, groups: Sequence[np.ndarray],
                               config: AgreementConfig, people: Sequence[np.ndarray] | None = None,
                               initial: pd.DataFrame | None = None) -> tuple[list[int], pd.DataFrame]:
     """The views to take out, worst first, until the others agree with each other (at least two stay): one wrong

@@ -29,7 +29,7 @@ from humancal.calibration.bundle import BundleResult, bundle_adjust
 from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.reregister import reregister_view
 from humancal.calibration.view_agreement import AgreementConfig, isolate_disagreeing_views, view_agreement
-from humancal.camera import Camera, intrinsic_matrices, intrinsic_matrix
+from humancal.camera import Camera, CameraRig, intrinsic_matrices, intrinsic_matrix
 from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
 
@@ -102,14 +102,14 @@ class ViewRepair:
         return sorted(before & set(self.final.loc[self.final["verdict"] == "ok", "view"].astype(int)))
 
 
-def cameras_of(ba: BundleResult, inputs: RepairInputs) -> list[Camera]:
-    """The cameras of a bundle adjustment's result."""
+def cameras_of(ba: BundleResult, inputs: RepairInputs) -> CameraRig:
+    """The rig of a bundle adjustment's result."""
     out = []
     for v in range(len(ba.fx_px)):
         K = intrinsic_matrix(ba.fx_px[v], ba.fy_px[v], *inputs.principal_points_px[v])
         w, h = inputs.image_sizes_px[v]
         out.append(Camera(K, ba.R_cam_from_world[v], ba.t_cam_from_world_m[v], int(w), int(h)))
-    return out
+    return CameraRig.from_cameras(out)
 
 
 def _restrict(groups: list[np.ndarray], view: np.ndarray, keep: Sequence[int]) -> tuple[list[np.ndarray], list[int]]:
@@ -124,13 +124,13 @@ def _restrict(groups: list[np.ndarray], view: np.ndarray, keep: Sequence[int]) -
     return out, index
 
 
-def people_groups(cameras: list[Camera], inputs: RepairInputs) -> list[np.ndarray]:
+def people_groups(cameras: CameraRig, inputs: RepairInputs) -> list[np.ndarray]:
     """Every person of ``inputs.people_frames`` frames (spread evenly), found by the association with ``cameras``:
     detection rows, one array per person and frame (the explained fraction's people)."""
     return _people_of(list(range(len(cameras))), cameras, inputs, inputs.people_frames)[0]
 
 
-def agreement_of(cameras: list[Camera], groups: list[np.ndarray], inputs: RepairInputs,
+def agreement_of(cameras: CameraRig, groups: list[np.ndarray], inputs: RepairInputs,
                  reference_views: Sequence[int] | None = None, people: list[np.ndarray] | None = None
                  ) -> pd.DataFrame:
     """:func:`view_agreement` of a rig, its people found with its cameras unless given."""
@@ -138,7 +138,7 @@ def agreement_of(cameras: list[Camera], groups: list[np.ndarray], inputs: Repair
     return view_agreement(cameras, inputs.detections, groups, inputs.agreement, reference_views, people)
 
 
-def _people_of(views: list[int], cameras: list[Camera], inputs: RepairInputs, max_frames: int | None = None):
+def _people_of(views: list[int], cameras: CameraRig, inputs: RepairInputs, max_frames: int | None = None):
     """Groups and keypoints of the people found with the cameras of ``views`` alone (rows of all detections), in at
     most ``max_frames`` frames (default ``inputs.regroup_max_frames``)."""
     d = inputs.detections
@@ -146,7 +146,8 @@ def _people_of(views: list[int], cameras: list[Camera], inputs: RepairInputs, ma
     remap = np.full(len(cameras), -1)
     remap[views] = np.arange(len(views))
     subset = DenseDetections(d.frame[rows], remap[d.view[rows]], d.det_id[rows], d.keypoints_px[rows], d.scores[rows])
-    found = regroup_with_cameras(subset, inputs.lifted.subset(rows), [cameras[v] for v in views],
+    found = regroup_with_cameras(subset, inputs.lifted.subset(rows),
+                                 CameraRig.from_cameras([cameras[v] for v in views]),
                                  max_frames or inputs.regroup_max_frames)
     return [rows[g] for g in found.groups], found.points_world_m
 
@@ -174,7 +175,7 @@ def _repair(ba, groups, isolated: list[int], inputs: RepairInputs):
     else:
         people_groups = kept
     people = _people_by_frame(people_groups, ba_good.points_world_m, d.frame)
-    cameras = cameras_of(ba_good, inputs)
+    cameras = list(cameras_of(ba_good, inputs))  # the views placed again replace theirs below
     widths = inputs.image_sizes_px[:, 0].astype(float)
     field = float(np.median(ba_good.fx_px[good] / widths[good]))  # the agreeing views' typical field of view
     placed = []
@@ -191,7 +192,7 @@ def _repair(ba, groups, isolated: list[int], inputs: RepairInputs):
         placed.append(v)
     if not placed:
         return None
-    all_groups, all_points = _people_of(list(range(V)), cameras, inputs)
+    all_groups, all_points = _people_of(list(range(V)), CameraRig.from_cameras(cameras), inputs)
     if len(all_groups) < 3:
         return None
     f = np.array([c.K[0, 0] for c in cameras])

@@ -13,14 +13,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from humancal.camera import Camera, cameras_by_view, cameras_to_table
+from humancal.camera import CameraRig, cameras_by_view, cameras_to_table
 from humancal.formats import CAMERA_READ_FORMATS, FormatError, infer_camera_format, read_cameras
 from humancal.geometry.projection import undistort_points_px
 
 __all__ = ["read_capture_cameras", "undistort_known_views"]
 
 
-def _read(path: Path, fmt: str | None, sizes: Sequence[tuple[int, int]], format_option: str) -> list[Camera]:
+def _read(path: Path, fmt: str | None, sizes: Sequence[tuple[int, int]], format_option: str) -> CameraRig:
     if fmt is None:
         try:
             fmt = infer_camera_format(path)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.formats import FormatError, get_skeleton, read_cameras
 from humancal.formats.detections.table import IMAGE_SIZE_ATTR
 from humancal.grouping import CandidateFrame, GroupingConfig, group_detections
@@ -57,7 +57,7 @@ class ShelfSequence:
         detections: canonical ``detections`` table (sequence "test", frames 0..300, views 0..4), grouped people with
             the canonical 23 joints in pixels; only detected joints have rows; ``attrs["image_size_px"]`` holds
             ``{view: (width_px, height_px)}`` as the shared detection readers leave it.
-        cameras: the 5 calibrated cameras, view order.
+        cameras: the rig of the 5 calibrated cameras, view order.
         gt_poses: canonical ``poses3d`` table of the ground truth, ``joint`` holding :data:`SHELF15_JOINTS` names,
             metres, world Z up.
         gt_joints_world_m: (frame, 4, 15, 3) the same ground truth as an array indexed by person id; NaN where a
@@ -68,7 +68,7 @@ class ShelfSequence:
     """
 
     detections: pd.DataFrame
-    cameras: tuple[Camera, ...]
+    cameras: CameraRig
     gt_poses: pd.DataFrame
     gt_joints_world_m: np.ndarray
     gt_present: np.ndarray
@@ -322,7 +322,7 @@ def load_shelf(root: str | Path, config: GroupingConfig | None = None) -> ShelfS
     )
     return ShelfSequence(
         detections=detections,
-        cameras=tuple(cameras),
+        cameras=cameras,
         gt_poses=shelf_gt_table(joints, present, valid),
         gt_joints_world_m=joints,
         gt_present=present,

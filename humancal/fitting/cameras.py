@@ -1,6 +1,6 @@
 """The cameras as variables of a fit: which parameters move (``CAMERA_REGIMES``) and their parametrisation.
 
-Regimes (the paper's Tables; ``docs/bodies.md``):
+Regimes (the paper's Tables; ``docs/refinement.md``):
 
 * ``fixed``: the cameras are held (a fit with known, or separately calibrated, cameras);
 * ``ext``: the extrinsics move, the intrinsics are known (held);

@@ -64,8 +64,8 @@ class BodyFitConfig(Config):
             before the joint refinement starts from them. Free points take up a detector's own definition of the
             joints, which the bodies cannot (``docs/refinement.md``, "A detector with its own joints").
         bundle_solver: how that bundle adjustment is solved (``humancal.fitting.bundle``): ``lm``
-            (Levenberg-Marquardt with the points eliminated, run to convergence) or ``lbfgs`` (the earlier solver,
-            100 L-BFGS iterations, which stopped short of the minimum; ``docs/refinement.md``).
+            (Levenberg-Marquardt with the points eliminated, run to convergence) or ``lbfgs`` (100 L-BFGS
+            iterations, which stop short of the minimum; ``docs/results/refinement.md``).
         bundle_max_frames: that bundle adjustment uses every k-th frame, k = max(1, T // bundle_max_frames), so at
             most ``2 * bundle_max_frames - 1`` frames (the cameras are static: a few hundred frames fix them, and
             the solve costs in proportion to the frames).

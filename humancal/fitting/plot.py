@@ -65,7 +65,7 @@ def plot_fit_reprojection(body: BodyModel, motions: FittedMotions, observations:
         if v >= V:
             ax.axis("off")
             continue
-        camera = rig.to_cameras()[v]
+        camera = rig[v]
         drawn = []
         for k, p in enumerate(people):
             colour = colours(int(motions.person_ids[p]) % colours.N)

@@ -5,7 +5,7 @@
   derived joints (neck, mid-hip, Shelf head joints).
 * :mod:`humancal.formats.detections`: OpenPose / COCO-style detection files <-> the canonical detections table.
 * :mod:`humancal.formats.cameras`: camera files (humancal JSON, Shelf, Pose2Sim/anipose TOML, EasyMocap YAML,
-  COLMAP text; Qualisys .qca.txt read only) <-> :class:`humancal.camera.Camera` lists.
+  COLMAP text; Qualisys .qca.txt read only) <-> :class:`humancal.camera.CameraRig` rigs.
 
 Every reader raises :class:`FormatError` (a ``ValueError``) with a one-line message naming the file, the field
 and what was expected. Documentation with examples: ``docs/formats.md``.

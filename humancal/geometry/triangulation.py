@@ -8,13 +8,13 @@ reprojection error exceeds a threshold and solves again.
 Example: two cameras 90 degrees apart place a point exactly from its two pixels:
 
     >>> import numpy as np
-    >>> from humancal.camera import Camera, project_points
+    >>> from humancal.camera import Camera, CameraRig, project_points
     >>> from humancal.geometry.triangulation import triangulate_dlt
     >>> K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
     >>> front = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])   # looking along +y
     >>> side = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])   # looking along -x
-    >>> cameras = [Camera.from_center(K, front, [0.0, -4.0, 1.0], 640, 480),
-    ...            Camera.from_center(K, side, [4.0, 0.0, 1.0], 640, 480)]
+    >>> cameras = CameraRig.from_cameras([Camera.from_center(K, front, [0.0, -4.0, 1.0], 640, 480),
+    ...                                   Camera.from_center(K, side, [4.0, 0.0, 1.0], 640, 480)])
     >>> point = np.array([[0.2, 0.1, 1.5]])
     >>> pixels = np.stack([project_points(c, point)[0] for c in cameras])   # (views, points, 2)
     >>> points, views = triangulate_dlt(cameras, pixels, np.ones((2, 1)))
@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from humancal.camera import Camera, project_points
+from humancal.camera import CameraRig, project_points
 
 __all__ = ["triangulate_dlt", "reprojection_errors_px"]
 
 
 def triangulate_dlt(
-    cameras: list[Camera],
+    cameras: CameraRig,
     points_px: np.ndarray,
     weights: np.ndarray,
     *,
@@ -42,7 +42,7 @@ def triangulate_dlt(
     """Confidence-weighted DLT triangulation of many points at once.
 
     Args:
-        cameras: V cameras (distortion is ignored: undistort detections first if it matters).
+        cameras: the rig of V cameras (distortion is ignored: undistort detections first if it matters).
         points_px: (V, N, 2) pixel coordinates of N points in each view (any value where missing).
         weights: (V, N) non-negative confidences; 0 marks a missing observation.
         min_views: a point needs observations with weight > 0 in at least this many views.
@@ -87,7 +87,7 @@ def triangulate_dlt(
 
 
 def _solve(
-    cameras: list[Camera], points_px: np.ndarray, weights: np.ndarray, min_views: int
+    cameras: CameraRig, points_px: np.ndarray, weights: np.ndarray, min_views: int
 ) -> tuple[np.ndarray, np.ndarray]:
     V, N = weights.shape
     A = np.zeros((N, 2 * V, 4))
@@ -112,11 +112,11 @@ def _solve(
     return X, np.where(ok, n_views, 0)
 
 
-def reprojection_errors_px(cameras: list[Camera], points_world_m: np.ndarray, points_px: np.ndarray) -> np.ndarray:
+def reprojection_errors_px(cameras: CameraRig, points_world_m: np.ndarray, points_px: np.ndarray) -> np.ndarray:
     """Pixel distance between projected 3D points and observed 2D points.
 
     Args:
-        cameras: V cameras.
+        cameras: the rig of V cameras.
         points_world_m: (N, 3) world points (NaN allowed).
         points_px: (V, N, 2) observations (NaN allowed).
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import Camera, CameraRig
 from humancal.lifter.config import VirtualCameraRanges
 from humancal.lifter.features import R_crop_from_cam
 from humancal.camera import intrinsic_matrix, look_at
@@ -44,8 +44,8 @@ def sample_virtual_cameras(
     pelvis_height_m: float,
     ranges: VirtualCameraRanges,
     rng: np.random.Generator,
-) -> list[Camera]:
-    """Cameras around a person standing near the world origin (Z up, floor z = 0).
+) -> CameraRig:
+    """A virtual rig of cameras around a person standing near the world origin (Z up, floor z = 0).
 
     Args:
         num_cameras: how many cameras (>= 1).
@@ -55,7 +55,7 @@ def sample_virtual_cameras(
         rng: source of randomness.
 
     Returns:
-        ``num_cameras`` ideal pinhole cameras (square pixels, principal point at the image centre).
+        the rig of ``num_cameras`` ideal pinhole cameras (square pixels, principal point at the image centre).
 
     Raises:
         ValueError: ``num_cameras`` < 1, a non-positive height, or ranges that admit no focal length.
@@ -99,4 +99,4 @@ def sample_virtual_cameras(
         # Turn the camera so the aim point's ray (now the optical axis) becomes the ray through `pixel`.
         R_shift = R_crop_from_cam(pixel[None], K)[0].T
         cameras.append(Camera.from_center(K, R_shift @ R_aimed, centre, width, height))
-    return cameras
+    return CameraRig.from_cameras(cameras)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from humancal.camera import Camera, project_points
+from humancal.camera import Camera, CameraRig, project_points
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX, NUM_JOINTS, joint_indices
 from humancal.synthetic.detector_errors import (
     border_distance_px,
@@ -169,7 +169,7 @@ def _view_detections(
 def _false_positives(
     keypoints_world_m: np.ndarray,
     height_m: np.ndarray,
-    cameras: list[Camera],
+    cameras: CameraRig,
     noise: DetectorNoise,
     rng: np.random.Generator,
 ) -> dict[str, np.ndarray]:
@@ -251,7 +251,7 @@ def _false_positives(
 def simulate_detections(
     keypoints_world_m: np.ndarray,
     height_m: np.ndarray,
-    cameras: list[Camera],
+    cameras: CameraRig,
     noise: DetectorNoise,
     rng: np.random.Generator,
     hidden: np.ndarray | None = None,
@@ -299,7 +299,7 @@ def simulate_view_detections(
     view_keypoints_world_m: list[np.ndarray],
     view_frames: list[np.ndarray],
     height_m: np.ndarray,
-    cameras: list[Camera],
+    cameras: CameraRig,
     noise: DetectorNoise,
     rng: np.random.Generator,
     view_hidden: list[np.ndarray | None] | None = None,

@@ -15,7 +15,7 @@ import logging
 
 import numpy as np
 
-from humancal.camera import Camera, intrinsic_matrix, look_at
+from humancal.camera import Camera, CameraRig, intrinsic_matrix, look_at
 from humancal.settings import dataset_dir
 from humancal.synthetic.config import SceneConfig
 from humancal.synthetic.h36m_cameras import axes_meeting_point, load_h36m_cameras
@@ -87,7 +87,7 @@ def _fit_distance_m(
     return high
 
 
-def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
+def ring_rig(config: SceneConfig, rng: np.random.Generator) -> CameraRig:
     """Cameras on a full circle (``"ring"``) or on an arc of ``arc_span_deg`` (``"arc"``) around the area.
 
     Azimuths are evenly spaced with a random jitter of a quarter spacing; each camera draws its focal length
@@ -107,7 +107,7 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
         rng: source of randomness.
 
     Returns:
-        ``config.num_views`` cameras.
+        the rig of ``config.num_views`` cameras.
     """
     num = config.num_views
     width, height = config.image_size_px
@@ -149,17 +149,17 @@ def ring_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
                                   np.sin(pitch[v])])
             center = targets[v] + distance * direction
             cameras.append(_camera(focal[v], lenses, v, center, targets[v], rolls[v], width, height))
-        return cameras
+        return CameraRig.from_cameras(cameras)
     radius = 0.5 * float(np.hypot(*config.area_size_m)) + _BODY_RADIUS_M
     half_fov = np.arctan(half_w) if distorted else np.arctan(width / (2.0 * focal))
     distance = radius / np.sin(config.area_fill * half_fov)
     for v in range(num):
         center = np.array([distance[v] * np.cos(azimuth[v]), distance[v] * np.sin(azimuth[v]), cam_height[v]])
         cameras.append(_camera(focal[v], lenses, v, center, targets[v], rolls[v], width, height))
-    return cameras
+    return CameraRig.from_cameras(cameras)
 
 
-def dome_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
+def dome_rig(config: SceneConfig, rng: np.random.Generator) -> CameraRig:
     """Cameras of a capture studio (``"dome"``): spread around the area at evenly spaced azimuths (a quarter
     spacing of jitter), each at an elevation drawn from ``config.dome_elevation_range_deg`` as seen from its aim
     point (knee height to overhead), at the distance where the box of the area (plus a body radius, floor to 2 m)
@@ -167,7 +167,7 @@ def dome_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     floor is raised to it along its line of sight's elevation. Lenses as in :func:`ring_rig`.
 
     Returns:
-        ``config.num_views`` cameras.
+        the rig of ``config.num_views`` cameras.
     """
     num = config.num_views
     width, height = config.image_size_px
@@ -189,10 +189,10 @@ def dome_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
         direction = np.array([np.cos(azimuth[v]) * np.cos(elevation[v]), np.sin(azimuth[v]) * np.cos(elevation[v]),
                               np.sin(elevation[v])])
         cameras.append(_camera(focal[v], lenses, v, target + distance * direction, target, roll, width, height))
-    return cameras
+    return CameraRig.from_cameras(cameras)
 
 
-def _far_cameras(cameras: list[Camera], config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
+def _far_cameras(cameras: CameraRig, config: SceneConfig, rng: np.random.Generator) -> CameraRig:
     """The last ``config.far_views`` cameras moved back along their optical axes to ``far_distance_factor`` times
     their distance from the area centre (at mid-body height), their focal lengths multiplied by the same factor
     (no draw when there are none: the other scenes keep their random stream)."""
@@ -211,7 +211,7 @@ def _far_cameras(cameras: list[Camera], config: SceneConfig, rng: np.random.Gene
         center = c.center_world_m - (factor[k] - 1.0) * depth * forward
         far = Camera.from_center(K, c.R_cam_from_world, center, c.width_px, c.height_px)
         moved[v] = Camera(far.K, far.R_cam_from_world, far.t_cam_from_world_m, c.width_px, c.height_px, c.distortion)
-    return moved
+    return CameraRig.from_cameras(moved)
 
 
 def _draw_focal_or_fov(config: SceneConfig, rng: np.random.Generator, num: int) -> np.ndarray:
@@ -265,7 +265,7 @@ def _camera(focal_px: float, lenses: LensDraws, v: int, center: np.ndarray, targ
     return Camera(camera.K, camera.R_cam_from_world, camera.t_cam_from_world_m, width, height, distortion)
 
 
-def h36m_rig(config: SceneConfig) -> list[Camera]:
+def h36m_rig(config: SceneConfig) -> CameraRig:
     """The Human3.6M cameras of ``config.h36m_subject`` (the first ``num_views`` in file order).
 
     Human3.6M's world is already Z up with the floor at z = 0; it is converted from millimetres to metres
@@ -291,10 +291,10 @@ def h36m_rig(config: SceneConfig) -> list[Camera]:
         focal = 0.5 * (K_raw[0, 0] + K_raw[1, 1])
         cameras.append(Camera.from_center(intrinsic_matrix(focal, focal, width / 2.0, height / 2.0), R_v, center - shift, width, height))
         logger.debug("h36m camera %s: focal %.1f px, centre %s m", camera_id, focal, np.round(center - shift, 3))
-    return cameras
+    return CameraRig.from_cameras(cameras)
 
 
-def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
+def make_rig(config: SceneConfig, rng: np.random.Generator) -> CameraRig:
     """The cameras of ``config.rig`` (see :func:`ring_rig`, :func:`dome_rig`, :func:`h36m_rig`), the last
     ``config.far_views`` of them moved far back with zoom lenses.
 
@@ -314,7 +314,7 @@ def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
         for v, c in enumerate(cameras):
             K, distortion = _with_lens(c.K, lenses, v)
             with_lenses.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, distortion))
-        cameras = with_lenses
+        cameras = CameraRig.from_cameras(with_lenses)
     else:
         raise ValueError(f"SceneConfig.rig={config.rig!r} is unknown; allowed: 'ring', 'arc', 'dome', 'h36m'")
     cameras = _far_cameras(cameras, config, rng)
@@ -322,7 +322,7 @@ def make_rig(config: SceneConfig, rng: np.random.Generator) -> list[Camera]:
     return _shift_principal_points(cameras, config.principal_point_offset_max_frac, rng)
 
 
-def _offset_principal_points(cameras: list[Camera], offset_px: float, rng: np.random.Generator) -> list[Camera]:
+def _offset_principal_points(cameras: CameraRig, offset_px: float, rng: np.random.Generator) -> CameraRig:
     """The cameras with their principal points ``offset_px`` from where they were, each in a drawn direction (no
     draw when 0: the scenes without an offset keep their random stream)."""
     if offset_px == 0.0:
@@ -333,10 +333,10 @@ def _offset_principal_points(cameras: list[Camera], offset_px: float, rng: np.ra
         K = c.K.copy()
         K[:2, 2] += offset_px * np.array([np.cos(a), np.sin(a)])
         moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
-    return moved
+    return CameraRig.from_cameras(moved)
 
 
-def _shift_principal_points(cameras: list[Camera], max_frac: float, rng: np.random.Generator) -> list[Camera]:
+def _shift_principal_points(cameras: CameraRig, max_frac: float, rng: np.random.Generator) -> CameraRig:
     """The cameras with their principal points moved by ``(u_x width, u_y height)``, ``u`` uniform in
     ``[-max_frac, max_frac]`` per axis and camera (no draw when 0: the scenes without it keep their random stream)."""
     if max_frac == 0.0:
@@ -347,4 +347,4 @@ def _shift_principal_points(cameras: list[Camera], max_frac: float, rng: np.rand
         K = c.K.copy()
         K[:2, 2] += u * np.array([c.width_px, c.height_px])
         moved.append(Camera(K, c.R_cam_from_world, c.t_cam_from_world_m, c.width_px, c.height_px, c.distortion))
-    return moved
+    return CameraRig.from_cameras(moved)

@@ -22,7 +22,7 @@ import pandas as pd
 import torch
 
 from humancal.body import PHENOTYPE_NAMES, BodyModel, RestSkeleton
-from humancal.camera import Camera, cameras_to_table
+from humancal.camera import CameraRig, cameras_to_table
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
 from humancal.synthetic.clocks import ViewClocks, draw_clocks, hidden_at, keypoints_at, synced_clocks
 from humancal.synthetic.config import OUT_OF_VIEW_DURATION_S, SceneConfig
@@ -66,7 +66,7 @@ class SyntheticScene:
     Attributes:
         config: the :class:`SceneConfig` it was made from.
         sequence: the sequence name written into every table.
-        rig: the V cameras.
+        rig: the V cameras (a :class:`~humancal.camera.CameraRig`, a sequence of cameras in view order).
         person_ids: (P,) person ids.
         phenotypes: (P, 6) anny phenotypes, columns ``humancal.body.PHENOTYPE_NAMES``.
         height_m: (P,) standing heights, metres.
@@ -93,7 +93,7 @@ class SyntheticScene:
     associations: pd.DataFrame
     people: pd.DataFrame
     motions: pd.DataFrame
-    rig: tuple[Camera, ...]
+    rig: CameraRig
     person_ids: np.ndarray
     phenotypes: np.ndarray
     height_m: np.ndarray
@@ -269,7 +269,7 @@ def _simulate_detector(
     clocks: ViewClocks,
     detected_m: np.ndarray,
     people: People,
-    rig: list[Camera],
+    rig: CameraRig,
     hidden: np.ndarray | None,
     rng: np.random.Generator,
 ) -> DetectorOutput:
@@ -288,7 +288,7 @@ def _assemble_scene(
     sequence: str,
     people: People,
     motions: Motions,
-    rig: list[Camera],
+    rig: CameraRig,
     detector: DetectorOutput,
     det_id: np.ndarray,
     bias_m: np.ndarray,
@@ -304,7 +304,7 @@ def _assemble_scene(
         associations=_associations_table(sequence, detector, det_id),
         people=_people_table(sequence, people),
         motions=_motions_table(sequence, people, motions),
-        rig=tuple(rig),
+        rig=rig,
         person_ids=people.person_ids,
         phenotypes=people.phenotypes,
         height_m=people.height_m,

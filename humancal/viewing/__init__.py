@@ -4,7 +4,7 @@ Example:
     >>> import rerun as rr  # doctest: +SKIP
     >>> from humancal.viewing import CaptureView, record_capture  # doctest: +SKIP
     >>> recording = rr.RecordingStream("humancal"); recording.save("capture.rrd")  # doctest: +SKIP
-    >>> record_capture(CaptureView("mine", ["cam0"], {"final": [camera]}, 30.0), recording)  # doctest: +SKIP
+    >>> record_capture(CaptureView("mine", ["cam0"], {"final": rig}, 30.0), recording)  # doctest: +SKIP
 """
 
 from humancal.viewing.mesh import decimation

@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from humancal.camera import Camera, project_points
+from humancal.camera import Camera, CameraRig, project_points
 from humancal.formats import FormatError
 from humancal.formats.detections.openpose import frame_numbers_in_names
 from humancal.viewing.mesh import decimation
@@ -222,7 +222,7 @@ def render_silhouettes(camera: Camera, people_vertices_m: Sequence[np.ndarray], 
     return image
 
 
-def write_footage(view_names: Sequence[str], cameras: Sequence[Camera],
+def write_footage(view_names: Sequence[str], cameras: CameraRig,
                   meshes: Mapping[int, tuple[np.ndarray, np.ndarray]], faces: np.ndarray, frames: Sequence[int],
                   fps: float, out_dir: str | Path, *, cell_m: float = 0.02,
                   progress: Callable[[str], None] = lambda message: None) -> list[Path]:
@@ -231,7 +231,7 @@ def write_footage(view_names: Sequence[str], cameras: Sequence[Camera],
 
     Args:
         view_names: (V,) the views' names.
-        cameras: (V,) the cameras that filmed them.
+        cameras: the rig of the V cameras that filmed them.
         meshes: person id -> ((T,) frames, (T, N, 3) vertices, world metres): the bodies.
         faces: (F, 3) the bodies' triangles.
         frames: the frame numbers to render.

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.plotting import pyplot, save_figure
 from humancal.viewing.reprojection import detection_people, reprojected_fit
 
@@ -54,7 +54,7 @@ def plot_detections_over_time(detections: pd.DataFrame, view_names: Sequence[str
     return save_figure(fig, path_png)
 
 
-def plot_reprojection_errors(keypoints_world_m: dict[int, tuple[np.ndarray, np.ndarray]], cameras: Sequence[Camera],
+def plot_reprojection_errors(keypoints_world_m: dict[int, tuple[np.ndarray, np.ndarray]], cameras: CameraRig,
                              detections: pd.DataFrame, associations: pd.DataFrame, view_names: Sequence[str],
                              path_png: str | Path, *, title: str = "") -> Path:
     """Per view over time: the mean distance between the fitted keypoints reprojected and the detections the
@@ -63,7 +63,7 @@ def plot_reprojection_errors(keypoints_world_m: dict[int, tuple[np.ndarray, np.n
 
     Args:
         keypoints_world_m: person id -> ((T,) frames, (T, 23, 3) fitted keypoints, world metres).
-        cameras: (V,) the cameras the fit is seen through.
+        cameras: the rig of the V cameras the fit is seen through.
         detections: a ``detections`` table.
         associations: the ``associations`` table (person id per detection).
         view_names: (V,) the views' names.

@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 import rerun as rr
 
-from humancal.camera import Camera
+from humancal.camera import Camera, CameraRig
 from humancal.keypoints import JOINT_INDEX, LIMB_INDEX, NUM_JOINTS
 from humancal.viewing.footage import Footage, FootageReader
 from humancal.viewing.mesh import decimation
@@ -56,7 +56,7 @@ class CaptureView:
     Attributes:
         name: the capture (partition) name.
         view_names: the views' names, in view order.
-        cameras: camera kind (keys of :data:`CAMERA_COLOURS`) -> one :class:`Camera` per view.
+        cameras: camera kind (keys of :data:`CAMERA_COLOURS`) -> the rig of that kind (one :class:`Camera` per view).
         fps: frame rate, frames per second (the ``time`` timeline).
         skeletons3d: the ``skeletons3d`` table (triangulated joints per frame and person).
         detections: the ``raw_detections`` table (2D keypoints, long form).
@@ -68,7 +68,7 @@ class CaptureView:
 
     name: str
     view_names: Sequence[str]
-    cameras: dict[str, list[Camera]]
+    cameras: dict[str, CameraRig]
     fps: float
     skeletons3d: pd.DataFrame | None = None
     detections: pd.DataFrame | None = None

@@ -1,5 +1,7 @@
 """CameraRig: round trips between cameras, the cameras table and tensors; projection through the rig."""
 
+from collections.abc import Sequence
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -42,6 +44,16 @@ def test_a_rig_is_a_sequence_of_its_cameras():
     with pytest.raises(IndexError):
         rig[4]
     assert not CameraRig.from_cameras([]) and list(CameraRig.from_cameras([])) == []
+    assert isinstance(rig, Sequence) and next(reversed(rig)) is rig[3]
+
+
+def test_the_cameras_table_reads_back_as_a_rig():
+    cams = _cameras()
+    back = cameras_from_table(cameras_to_table(cams, "s__x"))
+    assert isinstance(back, CameraRig) and len(back) == 3
+    np.testing.assert_array_equal(back.K, CameraRig.from_cameras(cams).K)
+    np.testing.assert_array_equal(cameras_to_table(CameraRig.from_cameras(cams), "s__x")["fx_px"],
+                                  cameras_to_table(cams, "s__x")["fx_px"])
 
 
 def test_round_trips_cameras_table_and_tensors():

@@ -1,4 +1,4 @@
-"""Camera files of other tools and datasets, read into and written from :class:`humancal.camera.Camera` lists.
+"""Camera files of other tools and datasets, read into and written from :class:`humancal.camera.CameraRig` rigs.
 
 Formats (``format=``):
 
@@ -21,7 +21,7 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.formats.cameras.colmap import read_colmap_text, write_colmap_text
 from humancal.formats.cameras.easymocap import read_easymocap, write_easymocap
 from humancal.formats.cameras.humancal_json import FORMAT_NAME, read_humancal_cameras, write_humancal_cameras
@@ -101,7 +101,7 @@ def infer_camera_format(path: str | Path) -> str:
     raise FormatError(path, None, unknown, repr(path.name))
 
 
-def read_cameras_with_names(path: str | Path, format: str | None = None, **options) -> tuple[list[Camera], list[str]]:
+def read_cameras_with_names(path: str | Path, format: str | None = None, **options) -> tuple[CameraRig, list[str]]:
     """Read cameras and their names from ``path``.
 
     Args:
@@ -111,7 +111,7 @@ def read_cameras_with_names(path: str | Path, format: str | None = None, **optio
             ``image_size`` (easymocap, required there), ``half_pixel_shift`` (colmap).
 
     Returns:
-        cameras and names, in the file's camera order.
+        the rig of the cameras and their names, in the file's camera order.
 
     Raises:
         FormatError: unknown format, or a bad file (the message names file and field).
@@ -131,18 +131,18 @@ def read_cameras_with_names(path: str | Path, format: str | None = None, **optio
     return reader(path, **options)
 
 
-def read_cameras(path: str | Path, format: str | None = None, **options) -> list[Camera]:
+def read_cameras(path: str | Path, format: str | None = None, **options) -> CameraRig:
     """Read cameras from ``path`` (see :func:`read_cameras_with_names`, which also returns the names)."""
     return read_cameras_with_names(path, format, **options)[0]
 
 
 def write_cameras(
-    cameras: Sequence[Camera], path: str | Path, format: str, names: Sequence[str] | None = None, **options
+    cameras: CameraRig, path: str | Path, format: str, names: Sequence[str] | None = None, **options
 ) -> Path:
     """Write cameras to ``path`` in ``format``.
 
     Args:
-        cameras: cameras in view order.
+        cameras: the rig to write (cameras in view order; a list of cameras is taken as one).
         path: the file (folder for easymocap and colmap).
         format: one of :data:`CAMERA_FORMATS`.
         names: camera names (default ``cam_00``, ``cam_01``...; shelf accepts only ``"0", "1", ...``).

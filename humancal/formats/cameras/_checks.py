@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import Camera, CameraRig
 from humancal.formats.errors import FormatError
 from humancal.geometry.rotations import rotmat_to_rotvec, rotvec_to_rotmat
 
@@ -167,8 +167,9 @@ def sizes_by_name(
     return [size_pair(p, path, f"image_size of camera '{n}'") for p, n in zip(pairs, names)]
 
 
-def check_writable(cameras: Sequence[Camera], what: str) -> list[Camera]:
-    """Cameras checked to be writable: at least one, all finite, rotations orthonormal, K a pinhole matrix."""
+def check_writable(cameras: CameraRig, what: str) -> CameraRig:
+    """The rig checked to be writable: at least one camera, all finite, rotations orthonormal, K a pinhole matrix
+    (a list of cameras is checked camera by camera and returned as a rig)."""
     cameras = list(cameras)
     if not cameras:
         raise FormatError(None, "cameras", f"at least one camera to write as {what}", "none")
@@ -180,4 +181,4 @@ def check_writable(cameras: Sequence[Camera], what: str) -> list[Camera]:
             raise FormatError(None, f"cameras[{i}]", "finite K, R, t and distortion", "non-finite values")
         rotation_matrix(cam.R_cam_from_world, None, f"cameras[{i}].R_cam_from_world")
         intrinsic_matrix(cam.K, None, f"cameras[{i}].K")
-    return cameras
+    return CameraRig.of(cameras)

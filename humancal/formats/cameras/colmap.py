@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from humancal.camera import Camera, intrinsic_matrix
+from humancal.camera import CameraRig, intrinsic_matrix
 from humancal.formats._io import atomic_write_texts, read_text
 from humancal.formats.cameras._checks import camera_names, check_writable, make_camera
 from humancal.formats.errors import FormatError
@@ -53,7 +53,7 @@ def colmap_paths(path: str | Path) -> tuple[Path, Path, Path]:
 
 def read_colmap_text(
     path: str | Path, *, half_pixel_shift: bool = True, length_unit_m: float = 1.0
-) -> tuple[list[Camera], list[str]]:
+) -> tuple[CameraRig, list[str]]:
     """Read a COLMAP text model (one view per image).
 
     Args:
@@ -62,7 +62,7 @@ def read_colmap_text(
         length_unit_m: metres per model unit (COLMAP models have an arbitrary scale unless aligned).
 
     Returns:
-        cameras: in IMAGE_ID order.
+        cameras: the rig, views in IMAGE_ID order.
         names: the image names.
 
     Raises:
@@ -99,11 +99,11 @@ def read_colmap_text(
         K, dist, size = intrinsics[camera_id]
         cameras.append(make_camera(K, R, t * length_unit_m, size, dist, images_path, field))
         names.append(name)
-    return cameras, names
+    return CameraRig.from_cameras(cameras), names
 
 
 def write_colmap_text(
-    cameras: Sequence[Camera],
+    cameras: CameraRig,
     path: str | Path,
     names: Sequence[str] | None = None,
     *,

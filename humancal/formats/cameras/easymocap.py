@@ -29,7 +29,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.formats._io import atomic_write_texts, read_text
 from humancal.formats.cameras._checks import (
     camera_names,
@@ -68,7 +68,7 @@ def read_easymocap(
     *,
     image_size: tuple[int, int] | Sequence[tuple[int, int]] | Mapping[str, tuple[int, int]] | None = None,
     length_unit_m: float = 1.0,
-) -> tuple[list[Camera], list[str]]:
+) -> tuple[CameraRig, list[str]]:
     """Read EasyMocap's ``intri.yml`` + ``extri.yml``.
 
     Args:
@@ -78,7 +78,7 @@ def read_easymocap(
         length_unit_m: metres per unit of ``T_<name>`` (1 for EasyMocap).
 
     Returns:
-        cameras: in the order of ``names`` in ``intri.yml``.
+        cameras: the rig, views in the order of ``names`` in ``intri.yml``.
         names: the camera names.
 
     Raises:
@@ -103,11 +103,11 @@ def read_easymocap(
         t = numbers(T, ((3,), (3, 1), (1, 3)), extri_path, f"T_{name}", "a 3x1 translation")
         R = _rotation(extri, name, extri_path)
         cameras.append(make_camera(K, R, t * length_unit_m, size, dist, extri_path, f"Rot_{name}"))
-    return cameras, names
+    return CameraRig.from_cameras(cameras), names
 
 
 def write_easymocap(
-    cameras: Sequence[Camera], path: str | Path, names: Sequence[str] | None = None
+    cameras: CameraRig, path: str | Path, names: Sequence[str] | None = None
 ) -> tuple[Path, Path]:
     """Write ``intri.yml`` and ``extri.yml`` (each atomically) into the folder ``path``.
 

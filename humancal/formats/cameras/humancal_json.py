@@ -24,7 +24,7 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.formats._io import atomic_write_text, load_json
 from humancal.formats.cameras._checks import (
     camera_names,
@@ -52,11 +52,11 @@ CONVENTION_V1: dict[str, str] = {
 """The conventions a version-1 file declares (and must declare to be read)."""
 
 
-def read_humancal_cameras(path: str | Path) -> tuple[list[Camera], list[str]]:
+def read_humancal_cameras(path: str | Path) -> tuple[CameraRig, list[str]]:
     """Read a ``humancal.cameras`` JSON file.
 
     Returns:
-        cameras: in file order.
+        cameras: the rig, views in file order.
         names: their names.
 
     Raises:
@@ -98,10 +98,10 @@ def read_humancal_cameras(path: str | Path) -> tuple[list[Camera], list[str]]:
         names.append(cam["name"])
     if len(set(names)) != len(names):
         raise FormatError(path, "cameras[].name", "distinct camera names", names)
-    return cameras, names
+    return CameraRig.from_cameras(cameras), names
 
 
-def write_humancal_cameras(cameras: Sequence[Camera], path: str | Path, names: Sequence[str] | None = None) -> Path:
+def write_humancal_cameras(cameras: CameraRig, path: str | Path, names: Sequence[str] | None = None) -> Path:
     """Write cameras as a ``humancal.cameras`` JSON file (atomically).
 
     Args:

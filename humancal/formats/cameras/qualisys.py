@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from humancal.camera import Camera, intrinsic_matrix
+from humancal.camera import Camera, CameraRig, intrinsic_matrix
 from humancal.formats.cameras._checks import make_camera
 from humancal.formats.errors import FormatError, missing_field
 
@@ -67,14 +67,14 @@ _TRANSFORM = ("x", "y", "z", "r11", "r12", "r13", "r21", "r22", "r23", "r31", "r
 _FOV = ("left", "top", "right", "bottom")
 
 
-def read_qualisys_calibration(path: str | Path) -> tuple[list[Camera], list[str]]:
+def read_qualisys_calibration(path: str | Path) -> tuple[CameraRig, list[str]]:
     """Read the video cameras of a Qualisys ``.qca.txt`` calibration (module docstring: what is assumed).
 
     Args:
         path: the ``.qca.txt`` file.
 
     Returns:
-        cameras: world -> camera, metres, OpenCV pixels, in natural order of their serials.
+        cameras: the rig (world -> camera, metres, OpenCV pixels), views in natural order of their serials.
         names: the serials.
 
     Raises:
@@ -103,7 +103,7 @@ def read_qualisys_calibration(path: str | Path) -> tuple[list[Camera], list[str]
         raise FormatError(path, "camera.serial", "distinct serials", serials)
     order = sorted(range(len(video)), key=lambda i: _natural_key(serials[i]))
     cameras = [_camera(video[i], serials[i], path) for i in order]
-    return cameras, [serials[i] for i in order]
+    return CameraRig.from_cameras(cameras), [serials[i] for i in order]
 
 
 def _is_video(model: str | None) -> bool:

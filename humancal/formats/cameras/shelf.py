@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.formats._io import atomic_write_text, load_json
 from humancal.formats.cameras._checks import (
     check_writable,
@@ -27,11 +27,11 @@ from humancal.formats.errors import FormatError, missing_field
 __all__ = ["read_shelf_calibration", "write_shelf_calibration"]
 
 
-def read_shelf_calibration(path: str | Path) -> tuple[list[Camera], list[str]]:
+def read_shelf_calibration(path: str | Path) -> tuple[CameraRig, list[str]]:
     """Read a Shelf/Campus ``calibration.json``.
 
     Returns:
-        cameras: in key order ``"0"``, ``"1"``, ... (no distortion).
+        cameras: the rig, views in key order ``"0"``, ``"1"``, ... (no distortion).
         names: the keys.
 
     Raises:
@@ -59,10 +59,10 @@ def read_shelf_calibration(path: str | Path) -> tuple[list[Camera], list[str]]:
         RT = numbers(cam["RT"], ((12,), (3, 4)), path, f"{key}.RT", what).reshape(3, 4)
         size = size_pair(cam["imgSize"], path, f"{key}.imgSize")
         cameras.append(make_camera(K, RT[:, :3], RT[:, 3], size, np.zeros(5), path, f"{key}.RT"))
-    return cameras, expected_keys
+    return CameraRig.from_cameras(cameras), expected_keys
 
 
-def write_shelf_calibration(cameras: Sequence[Camera], path: str | Path, names: Sequence[str] | None = None) -> Path:
+def write_shelf_calibration(cameras: CameraRig, path: str | Path, names: Sequence[str] | None = None) -> Path:
     """Write cameras as a Shelf ``calibration.json`` (atomically).
 
     Args:

@@ -34,7 +34,7 @@ from typing import Literal
 
 import numpy as np
 
-from humancal.camera import Camera
+from humancal.camera import CameraRig
 from humancal.formats._io import atomic_write_text, read_text
 from humancal.formats.cameras._checks import (
     camera_names,
@@ -56,7 +56,7 @@ Flavor = Literal["pose2sim", "anipose"]
 _VECTOR3 = ((3,), (3, 1), (1, 3))
 
 
-def read_toml_calibration(path: str | Path, *, length_unit_m: float = 1.0) -> tuple[list[Camera], list[str]]:
+def read_toml_calibration(path: str | Path, *, length_unit_m: float = 1.0) -> tuple[CameraRig, list[str]]:
     """Read a Pose2Sim or anipose calibration TOML.
 
     Args:
@@ -64,7 +64,7 @@ def read_toml_calibration(path: str | Path, *, length_unit_m: float = 1.0) -> tu
         length_unit_m: metres per unit of ``translation`` (1 for Pose2Sim; anipose: the board's unit, e.g. 0.001).
 
     Returns:
-        cameras: in file order.
+        cameras: the rig, views in file order.
         names: each camera's ``name`` (the table name when ``name`` is absent).
 
     Raises:
@@ -104,11 +104,11 @@ def read_toml_calibration(path: str | Path, *, length_unit_m: float = 1.0) -> tu
         names.append(name)
     if len(set(names)) != len(names):
         raise FormatError(path, "name", "distinct camera names", names)
-    return cameras, names
+    return CameraRig.from_cameras(cameras), names
 
 
 def write_toml_calibration(
-    cameras: Sequence[Camera],
+    cameras: CameraRig,
     path: str | Path,
     names: Sequence[str] | None = None,
     *,

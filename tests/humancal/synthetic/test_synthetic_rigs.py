@@ -155,7 +155,7 @@ def test_height_drawn_rigs_look_down_from_high_and_level_from_low():
     # The distance rule fits the area's width only: from 7-9 m a landscape view may lose the near edge of the
     # floor (``camera_pitch_range_deg`` fits the whole box), but the middle of the area stays in every view.
     middle = _area_box(SceneConfig(num_people=1, area_size_m=(2.5, 2.0)), top_m=1.8)
-    for cam in high + low:
+    for cam in [*high, *low]:
         assert np.all(_inside_image(cam, middle))
     assert np.mean([_inside_image(cam, _area_box(SceneConfig(), top_m=0.0)).mean() for cam in high]) > 0.8
 
