@@ -11,7 +11,7 @@ from evaluation.association_metrics import associate_tables
 from humancal.baselines import triangulate_identified
 from humancal.camera import cameras_from_table
 from humancal.lifter import lifted_from_table
-from humancal.tables import empty_table
+from humancal.tables.schemas import empty_table
 from resources.datasets import DatasetsResource
 
 

@@ -13,10 +13,10 @@ from assets.motion_prior import prior_from_checkpoint
 from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
 from humancal.camera import CameraRig
+from humancal.datasets.inputs import body_fit_regime, sequence_fps
 from humancal.fitting import body_observations, fit_bodies
 from humancal.fitting.plot import plot_fit_reprojection, plot_fit_scene
 from humancal.geometry.rotations import rotation_distance_deg
-from humancal.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
 from humancal.viewing.pictures import plot_reprojection_errors
 from humancal.viewing.reprojection import fitted_keypoints
@@ -24,7 +24,6 @@ from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
 from resources.io_managers import checkpoint_content_version
 from resources.torch import TorchResource
-
 
 CODE_VERSION = "13"
 """13: the prior is an input (``motion_prior_checkpoint``): new weights make every fit stale through its data

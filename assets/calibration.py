@@ -21,10 +21,10 @@ from humancal.calibration import (
 )
 from humancal.camera import cameras_by_view, cameras_to_table, pinhole
 from humancal.captures.cameras import undistort_known_views
-from humancal.inputs import sequence_principal_points
+from humancal.datasets.inputs import sequence_principal_points
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import lift_detections_table, lifted_from_table, load_lifter
-from humancal.validation import (
+from humancal.tables.plausibility import (
     CheckReport,
     check_body_size,
     check_cameras_valid,

@@ -1,11 +1,11 @@
-"""Asset check results from the library's plausibility reports (:mod:`humancal.validation`), and the recorded
+"""Asset check results from the library's plausibility reports (:mod:`humancal.tables.plausibility`), and the recorded
 outcomes of the checks of an asset partition (read back by ``humancal update`` and the metric tables)."""
 
 from dataclasses import dataclass
 
 import dagster as dg
 
-from humancal.validation import CheckReport
+from humancal.tables.plausibility import CheckReport
 
 
 def check_result(

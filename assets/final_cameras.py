@@ -5,11 +5,11 @@ import pandas as pd
 
 from assets.checks import check_result
 from assets.common import sequence_asset, table_output
-from humancal.associations import Associations
 from humancal.calibration.final import choose_final_cameras
 from humancal.camera import CameraRig, cameras_by_view, with_known_distortion
 from humancal.lifter import lifted_from_table
-from humancal.validation import check_views_agree
+from humancal.tables.associations import Associations
+from humancal.tables.plausibility import check_views_agree
 
 
 @sequence_asset(

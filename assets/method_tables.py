@@ -6,17 +6,17 @@ import dagster as dg
 import pandas as pd
 
 from assets.common import ON_REQUEST_KEY, table_metadata, table_output
-from assets.motion_prior import prior_from_checkpoint
 from assets.metric_tables import camera_checks_of
+from assets.motion_prior import prior_from_checkpoint
 from assets.partitions import SEQUENCES
 from assets.settings import BodyFitSettings
 from evaluation.method_comparison import METHODS, method_metric_table
 from humancal.camera import cameras_from_table
-from humancal.inputs import sequence_fps
+from humancal.datasets.inputs import sequence_fps
 from humancal.lifter import lifted_from_table
 from humancal.prior import shipped_prior
 from humancal.prior.weights import PriorWeightsError
-from humancal.tables import empty_table
+from humancal.tables.schemas import empty_table
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
 from resources.prior_source import FIT_VARIANT

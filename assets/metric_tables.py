@@ -17,9 +17,9 @@ from evaluation.lifter_metrics import lifter_metrics_table
 from evaluation.rig_plot import plot_rig_comparison
 from evaluation.sequence_metrics import sequence_metric_table
 from humancal.camera import CameraRig, cameras_from_table
-from humancal.inputs import body_fit_regime, sequence_fps
+from humancal.datasets.inputs import body_fit_regime, sequence_fps
 from humancal.lifter import lifted_from_table
-from humancal.tables import empty_table
+from humancal.tables.schemas import empty_table
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource
 from resources.torch import TorchResource

@@ -15,7 +15,7 @@ import pandas as pd
 
 from assets.checks import latest_check_outcomes
 from assets.common import sequence_asset, table_output
-from humancal.tables import empty_table
+from humancal.tables.schemas import empty_table
 
 __all__ = ["CHECKED_ASSET", "TIMED_ASSETS", "UNCHECKED", "failed_checks", "recorded_failed_checks",
            "recorded_seconds", "run_records", "stage_seconds"]

@@ -9,8 +9,8 @@ import dagster as dg
 from assets.checks import check_result
 from assets.common import UPDATE_CONDITION, png_metadata, table_metadata, table_output
 from assets.partitions import SEQUENCES
-from humancal.inputs import load_sequence_inputs
-from humancal.validation import check_cameras_valid, check_detections_plausible
+from humancal.datasets.inputs import load_sequence_inputs
+from humancal.tables.plausibility import check_cameras_valid, check_detections_plausible
 from humancal.viewing.pictures import plot_detections_over_time
 from resources.body_model import BodyModelResource
 from resources.datasets import DatasetsResource

@@ -21,7 +21,7 @@ from assets.common import UPDATE_CONDITION, table_metadata, table_output
 from assets.partitions import SEQUENCES
 from evaluation.benchmark import stage_timings_markdown
 from evaluation.paper_results import paper_results
-from humancal.tables import SCHEMAS, validate_table
+from humancal.tables.schemas import SCHEMAS, validate_table
 
 __all__ = ["TimedGraph", "build_stage_timings_asset", "stage_timings_table", "timed_graph", "timed_partitions"]
 

@@ -35,12 +35,12 @@ from scipy.optimize import linear_sum_assignment
 
 from evaluation.protocols import MetricRow, evaluate_canonical_poses, evaluate_shelf_poses, metrics_table
 from humancal.association import AffinityConfig, TrackingConfig, associate, to_associations_table, to_skeletons_table
-from humancal.associations import Associations
-from humancal.calibration.alignment import align_rig
+from humancal.calibration.rig_alignment import align_rig
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
+from humancal.datasets.sequences import SequenceSpec
 from humancal.lifter import LiftedPoses
-from humancal.sequences import SequenceSpec
+from humancal.tables.associations import Associations
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["identity_metrics", "identity_confusion", "skeleton_metrics", "skeletons_in_truth", "protocol_of",
            "association_metric_table"]

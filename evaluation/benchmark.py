@@ -1,6 +1,6 @@
 """The benchmark table: every sequence's headline figures beside the paper's and the peers', and its markdown.
 
-:func:`benchmark_table` builds one long table (canonical table ``benchmark``, ``humancal/tables.py``) from whatever
+:func:`benchmark_table` builds one long table (canonical table ``benchmark``, ``humancal/tables/schemas.py``) from whatever
 metric rows exist: no method or metric is required, so a method that was not run (a prior ablation without its
 weights) is simply absent and its cells are blank. ``source`` says who measured a figure:
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from humancal.tables import SCHEMAS, validate_table
+from humancal.tables.schemas import SCHEMAS, validate_table
 
 __all__ = [
     "BASELINE_SOURCES",

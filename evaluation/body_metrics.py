@@ -17,7 +17,6 @@ estimated world) and ``seconds``.
 
 from __future__ import annotations
 
-
 import numpy as np
 import pandas as pd
 import torch
@@ -26,13 +25,13 @@ from evaluation.association_metrics import associate_tables, protocol_of, skelet
 from evaluation.camera_metrics import camera_metrics
 from evaluation.protocols import MetricRow, evaluate_reprojection, metrics_table
 from humancal.body import BodyModel
-from humancal.calibration.alignment import align_rig
+from humancal.calibration.rig_alignment import align_rig
 from humancal.camera import CameraRig
+from humancal.datasets.sequences import SequenceSpec
 from humancal.fitting import FittedMotions
 from humancal.keypoints import CANONICAL_JOINTS
 from humancal.lifter import lifted_from_table
-from humancal.poses import poses_to_dense
-from humancal.sequences import SequenceSpec
+from humancal.tables.poses import poses_to_dense
 
 __all__ = ["PIPELINE_METHOD", "body_metric_rows", "camera_and_body_rows", "keypoints_table", "pipeline_body_table", "skeleton_accel_rows"]
 
@@ -104,7 +103,7 @@ def _pve_mm(motions: FittedMotions, gt_motions: FittedMotions, true_of: dict[int
 
 def _whole_sequence_owner(associations: pd.DataFrame, gt_associations: pd.DataFrame) -> dict[int, int]:
     """Estimated person id -> the true id holding most of its detections over the whole sequence."""
-    from humancal.associations import Associations
+    from humancal.tables.associations import Associations
 
     est = associations[associations["person_id"] >= 0]
     true = Associations.from_table(gt_associations).person_of(est["frame"], est["view"], est["det_id"])

@@ -12,7 +12,7 @@ diagnostics, never a method path):
   (:func:`evaluation.camera_metrics.camera_errors`: similarity alignment of the centres), so its figures are
   directly comparable with the ``init`` / ``int_ext`` rows. A calibration from real detections that lands below
   this floor does so by luck of its errors, not by what the images say. scipy is used rather than the body fit's
-  bundle adjustment (:mod:`humancal.fitting.bundle`) because the conventions compared include one it does not
+  bundle adjustment (:mod:`humancal.fitting.joint_bundle`) because the conventions compared include one it does not
   model (separate fx and fy); under humancal's convention the two land on the same rig (a test checks it).
 * :func:`evaluation.camera_metrics.centred_principal_point_floor`: each true camera's pose alone re-estimated with a
   centred principal point (focal, other cameras and the points kept true; no alignment).

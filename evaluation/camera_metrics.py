@@ -4,7 +4,7 @@ Protocol:
 
 * The estimated rig is brought onto the ground-truth world by the least-squares **similarity** (Umeyama) of the
   camera centres (with two cameras, points one baseline ahead on each optical axis are added so that the
-  rotation about the baseline is fixed): :func:`humancal.calibration.alignment.align_rig`.
+  rotation about the baseline is fixed): :func:`humancal.calibration.rig_alignment.align_rig`.
 * ``focal_error_pct``: ``100 |f_est - f_gt| / f_gt`` with ``f = sqrt(fx fy)``.
 * ``position_error_mm``: distance between the aligned estimated centre and the true centre.
 * ``angle_error_deg``: geodesic angle between the aligned estimated rotation and the true one.
@@ -32,13 +32,13 @@ import numpy as np
 import pandas as pd
 
 from evaluation.protocols import MetricRow, metrics_table
-from humancal.associations import Associations
-from humancal.calibration.alignment import Similarity, align_rig
+from humancal.calibration.rig_alignment import Similarity, align_rig
 from humancal.camera import Camera, CameraRig
-from humancal.detections import detections_to_dense
 from humancal.geometry.rotations import rotation_distance_deg
 from humancal.geometry.triangulation import reprojection_errors_px, triangulate_dlt
-from humancal.long_tables import unique_rows
+from humancal.tables.associations import Associations
+from humancal.tables.detections import detections_to_dense
+from humancal.tables.pivot import unique_rows
 
 __all__ = ["CameraErrors", "camera_errors", "scale_error_pct", "centred_principal_point_floor", "reprojection_errors_per_view", "camera_metrics", "camera_metrics_table"]
 
@@ -53,7 +53,7 @@ def camera_errors(estimated: CameraRig, ground_truth: CameraRig) -> CameraErrors
     """Focal, position and angle errors of every view after the similarity alignment of the centres.
 
     Returns:
-        :class:`CameraErrors` with (V,) arrays and the :class:`~humancal.calibration.alignment.Similarity`.
+        :class:`CameraErrors` with (V,) arrays and the :class:`~humancal.calibration.rig_alignment.Similarity`.
 
     Raises:
         ValueError: the rigs differ in size.

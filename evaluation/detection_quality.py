@@ -35,7 +35,7 @@ import pandas as pd
 
 from humancal.camera import CameraRig
 from humancal.datasets.gt_matching import match_ground_truth
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = ["GroupingEvaluation", "evaluate_grouping", "detection_quality_metrics"]
 
@@ -86,7 +86,7 @@ def evaluate_grouping(
 
     Raises:
         ValueError: no shared joint names, views without a camera, or bad parameters.
-        humancal.tables.TableError: a table does not match its schema.
+        humancal.tables.schemas.TableError: a table does not match its schema.
     """
     match = match_ground_truth(
         detections,

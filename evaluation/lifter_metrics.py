@@ -8,7 +8,7 @@ Protocol (method ``"lifter"``), one lifted detection at a time:
   (``person_id`` -1), detections absent from the associations and detections the lifter did not lift are
   ignored.
 * **Ground truth**: the person's world joints read under the canonical joint names
-  (:func:`humancal.poses.poses_to_dense` over ``CANONICAL_JOINTS``; other names are ignored), moved into the
+  (:func:`humancal.tables.poses.poses_to_dense` over ``CANONICAL_JOINTS``; other names are ignored), moved into the
   detection's view with the ground-truth camera (``x_cam = R_cam_from_world x_world + t_cam_from_world_m``) and
   made relative to the **hip midpoint** (mean of ``left_hip`` and ``right_hip``). Synthetic scenes give all 23
   canonical joints. Shelf's ground truth (``humancal.datasets.shelf``, SHELF15 names) shares 12 names with the
@@ -47,11 +47,11 @@ import pandas as pd
 
 from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm
 from evaluation.protocols import MetricRow, metrics_table
-from humancal.associations import Associations
 from humancal.camera import cameras_from_table
 from humancal.keypoints import CANONICAL_JOINTS
 from humancal.lifter import ROOT_JOINTS, height_from_pose_m, lifted_from_table, root_relative
-from humancal.poses import poses_to_dense
+from humancal.tables.associations import Associations
+from humancal.tables.poses import poses_to_dense
 
 __all__ = [
     "METHOD",

@@ -52,11 +52,11 @@ from evaluation.protocols import metrics_table
 from humancal.association import associate, to_associations_table, to_skeletons_table
 from humancal.body import BodyModel
 from humancal.camera import Camera, CameraRig
-from humancal.fitting import BodyFitConfig, body_observations, bundle_adjust, fit_bodies
-from humancal.detections import DenseDetections
+from humancal.datasets.sequences import SequenceSpec
+from humancal.fitting import BodyFitConfig, body_observations, bundle_adjust_on_joints, fit_bodies
 from humancal.lifter import LiftedPoses
 from humancal.prior import MotionVAE
-from humancal.sequences import SequenceSpec
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["METHODS", "Method", "method_metric_table"]
 
@@ -166,7 +166,7 @@ def method_metric_table(spec: SequenceSpec, *, methods: list[str], priors: Calla
         observations, _ = body_observations(dense, people, skeletons, len(used))
         rig = CameraRig.of(used)
         if method.cameras == "bundle":
-            rig = bundle_adjust(observations, rig, config, regime="int_ext").cameras
+            rig = bundle_adjust_on_joints(observations, rig, config, regime="int_ext").cameras
         fit = fit_bodies(body, observations, rig, prior,
                          config.replace(cameras=method.regime, bundle_start=method.bundle_start), fps=fps)
         seconds = time.perf_counter() - start

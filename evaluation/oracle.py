@@ -27,13 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.associations import Associations
 from humancal.calibration.types import ankle_midpoints, hip_midpoints
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections, detections_to_dense
 from humancal.geometry.rotations import angle_between_deg, axis_angle_to_rotmat
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX
 from humancal.lifter import LiftedPoses
+from humancal.tables.associations import Associations
+from humancal.tables.detections import DenseDetections, detections_to_dense
 
 __all__ = [
     "StandIn",

@@ -13,15 +13,15 @@ import numpy as np
 import pandas as pd
 
 from evaluation.metrics import mpjpe_mm, pa_mpjpe_mm, pcp_correct
-from humancal.associations import Associations
 from humancal.camera import CameraRig
-from humancal.detections import detections_to_dense
 from humancal.formats import SKELETONS, from_canonical
 from humancal.geometry.alignment import fit_similarity
 from humancal.geometry.triangulation import reprojection_errors_px
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX
-from humancal.poses import poses_to_dense
-from humancal.tables import validate_table
+from humancal.tables.associations import Associations
+from humancal.tables.detections import detections_to_dense
+from humancal.tables.poses import poses_to_dense
+from humancal.tables.schemas import validate_table
 
 __all__ = ["MetricRow", "metrics_table", "evaluate_canonical_poses", "evaluate_reprojection", "evaluate_shelf_poses"]
 

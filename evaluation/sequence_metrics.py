@@ -7,7 +7,7 @@ import pandas as pd
 from evaluation.detection_quality import evaluate_grouping
 from evaluation.protocols import evaluate_canonical_poses, evaluate_reprojection, evaluate_shelf_poses, metrics_table
 from humancal.camera import CameraRig
-from humancal.sequences import SequenceSpec
+from humancal.datasets.sequences import SequenceSpec
 
 __all__ = ["baseline_metrics", "sequence_metric_table"]
 

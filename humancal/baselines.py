@@ -13,14 +13,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from humancal.associations import Associations
 from humancal.camera import CameraRig
 from humancal.config import Config, at_least, in_range, positive
-from humancal.detections import detections_to_dense
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
-from humancal.long_tables import has_repeats, unique_rows
-from humancal.tables import empty_table, validate_table
+from humancal.tables.associations import Associations
+from humancal.tables.detections import detections_to_dense
+from humancal.tables.pivot import has_repeats, unique_rows
+from humancal.tables.schemas import empty_table, validate_table
 
 __all__ = ["TriangulationConfig", "triangulate_identified"]
 

@@ -54,9 +54,9 @@ def register_drop(drop: Path, user_datasets: Path | None = None) -> str:
         ValueError, FileNotFoundError: the drop is invalid (the message names the file and field), or its name is
             taken; nothing is written then.
     """
-    from humancal.captures.folder import read_capture_folder
     from humancal.captures import load_capture
-    from humancal.sequences import add_user_sequence, load_datasets_config, partition_key
+    from humancal.captures.folder import read_capture_folder
+    from humancal.datasets.sequences import add_user_sequence, load_datasets_config, partition_key
 
     config, sequence = read_capture_folder(drop)
     key = partition_key(drop.name, sequence)

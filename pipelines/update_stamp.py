@@ -89,7 +89,7 @@ def _stat(path: Path) -> str:
 
 def fingerprint(command: str) -> str | None:
     """The fingerprint of ``command`` in the present state (``None``: the shortcut does not apply here)."""
-    from humancal.sequences import default_config_path, user_config_path
+    from humancal.datasets.sequences import default_config_path, user_config_path
     from humancal.settings import REPO_ROOT, data_root, state_dir
 
     home = state_dir() / "dagster_home"

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import dagster as dg
 
-from humancal.sequences import SequenceSpec, available_sequences, load_datasets_config, parse_partition_key
+from humancal.datasets.sequences import SequenceSpec, available_sequences, load_datasets_config, parse_partition_key
 from humancal.settings import data_root
 
 

@@ -28,7 +28,7 @@ import torch
 from upath import UPath
 
 from humancal.lifter import checkpoint_digest
-from humancal.tables import SCHEMAS, check_values, table_to_pandas, to_arrow
+from humancal.tables.schemas import SCHEMAS, check_values, table_to_pandas, to_arrow
 
 TABLE_METADATA_KEY = "humancal/table"
 """Asset metadata naming the canonical table an asset holds (validated on every write)."""

@@ -45,7 +45,6 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-
 import stress_sweep  # noqa: E402  (the calibration stress sweep, beside this script)
 
 METHODS = ("association", "epipolar_only", "association_gt_cameras", "epipolar_only_gt_cameras")
@@ -97,9 +96,9 @@ def run_scene(index: int, seed: int, ring: bool) -> dict:
     from humancal.association import AffinityConfig, TrackingConfig, associate, to_associations_table
     from humancal.calibration import CalibrationError, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
     from humancal.camera import CameraRig
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections
     from humancal.synthetic import generate_scene
+    from humancal.tables.detections import detections_to_dense
 
     config, row = scene_config(index, seed, ring)
     name = scene_name(index, ring)

@@ -22,13 +22,13 @@ import torch
 from scipy.stats import rankdata
 
 from humancal.association import AffinityConfig, pair_affinities
-from humancal.associations import Associations
 from humancal.body import BodyModel
 from humancal.camera import CameraRig
-from humancal.detections import detections_to_dense
 from humancal.geometry.rotations import axis_angle_to_rotmat
 from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
 from humancal.synthetic import generate_scene, preset
+from humancal.tables.associations import Associations
+from humancal.tables.detections import detections_to_dense
 
 
 def _roc_auc(positive: np.ndarray, score: np.ndarray) -> float:

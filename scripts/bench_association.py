@@ -19,12 +19,12 @@ import threadpoolctl
 import torch
 
 from humancal.association import TrackingConfig, associate
-from humancal.associations import Associations
 from humancal.body import BodyModel
 from humancal.camera import CameraRig
-from humancal.detections import detections_to_dense
 from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
 from humancal.synthetic import generate_scene, preset
+from humancal.tables.associations import Associations
+from humancal.tables.detections import detections_to_dense
 
 
 def pairwise_scores(truth: np.ndarray, found: np.ndarray, frame: np.ndarray, view: np.ndarray) -> tuple[float, float]:

@@ -22,15 +22,15 @@ import threadpoolctl
 import torch
 
 from humancal.association import associate, to_associations_table, to_skeletons_table
-from humancal.associations import Associations
 from humancal.body import BodyModel
 from humancal.camera import CameraRig
-from humancal.detections import detections_to_dense
 from humancal.fitting import BodyFitConfig, body_observations, fit_bodies
 from humancal.keypoints import JOINT_INDEX
 from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
 from humancal.prior import shipped_prior
 from humancal.synthetic import generate_scene, preset
+from humancal.tables.associations import Associations
+from humancal.tables.detections import detections_to_dense
 
 
 def _peak_rss_mb() -> float:

@@ -76,12 +76,12 @@ def scene_benchmark(repeats: int = 3) -> None:
     import torch
 
     from humancal.association import AffinityConfig, pair_affinities
-    from humancal.associations import Associations
     from humancal.body import BodyModel
     from humancal.camera import CameraRig
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.associations import Associations
+    from humancal.tables.detections import detections_to_dense
 
     torch.set_num_threads(2)
     with threadpoolctl.threadpool_limits(2):

@@ -65,12 +65,12 @@ def run_scene(job: tuple[int, int, dict, tuple[str, ...]]) -> pd.DataFrame:
     from humancal.association import associate, to_associations_table, to_skeletons_table
     from humancal.body import BodyModel
     from humancal.camera import CameraRig
-    from humancal.detections import detections_to_dense
+    from humancal.datasets.sequences import SequenceSpec
     from humancal.fitting import BodyFitConfig, body_observations, fit_bodies
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.prior import shipped_prior
-    from humancal.sequences import SequenceSpec
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.detections import detections_to_dense
 
     torch.set_num_threads(1)
     index, seed, overrides, methods = job

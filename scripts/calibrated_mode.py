@@ -60,7 +60,7 @@ def _register(source: str, work: Path) -> str:
     _run("export", "cameras", "--partition", source, "--ground-truth", "--format", "pose2sim", "--out", str(calib),
          "--overwrite")
     name = f"calmode_{dataset}"
-    from humancal.sequences import load_datasets_config
+    from humancal.datasets.sequences import load_datasets_config
 
     if f"{name}__capture" in load_datasets_config():
         _run("remove", name)
@@ -75,8 +75,8 @@ def _score(source: str, capture: str) -> pd.DataFrame:
     from evaluation.body_metrics import pipeline_body_table
     from humancal.body import BodyModel
     from humancal.camera import cameras_from_table
-    from humancal.inputs import sequence_fps
-    from humancal.sequences import load_datasets_config
+    from humancal.datasets.inputs import sequence_fps
+    from humancal.datasets.sequences import load_datasets_config
 
     raw_source, raw_capture = _stored("raw_detections", source), _stored("raw_detections", capture)
     keys = ["frame", "view", "det_id", "joint"]

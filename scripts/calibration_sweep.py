@@ -55,7 +55,6 @@ import pandas as pd  # noqa: E402
 
 from evaluation.camera_metrics import camera_errors, reprojection_errors_per_view  # noqa: E402
 from evaluation.oracle import stand_in_lifted_poses  # noqa: E402
-from humancal.associations import Associations  # noqa: E402
 from humancal.calibration import (  # noqa: E402
     CalibrationError,
     ExtrinsicsConfig,
@@ -64,8 +63,9 @@ from humancal.calibration import (  # noqa: E402
     estimate_intrinsics,
     plot_rigs,
 )
-from humancal.detections import detections_to_dense  # noqa: E402
 from humancal.lifter import LiftedPoses  # noqa: E402
+from humancal.tables.associations import Associations  # noqa: E402
+from humancal.tables.detections import detections_to_dense  # noqa: E402
 
 PAPER_SHELF = {"focal_error_pct": 8.15, "position_error_mm": 605.88, "angle_error_deg": 9.72,
                "reprojection_error_px": 44.94}

@@ -55,7 +55,14 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import stress_sweep  # noqa: E402  (the calibration stress sweep, beside this script)
 from sweep_scoring import (  # noqa: E402
-    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, calibrate_scene, quantiles, run_jobs, score_calibration, sweep_arguments)
+    SILENT_ANGLE_DEG,
+    SILENT_FOCAL_PCT,
+    calibrate_scene,
+    quantiles,
+    run_jobs,
+    score_calibration,
+    sweep_arguments,
+)
 
 FAMILIES = ("phone", "action_cam", "webcam")
 """Scene ``i`` is of family ``FAMILIES[i % 3]``."""
@@ -139,10 +146,10 @@ def run_scene(index: int, seed: int, oracle_sync: bool, lens: dict | None = None
     """Generate, (synchronise,) lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}.
     ``lens``: ``ExtrinsicsConfig`` lens settings (``lens_models``, ``principal_point``) other than the defaults."""
     from humancal.calibration import ExtrinsicsConfig
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections
     from humancal.synthetic import generate_scene
     from humancal.synthetic.clocks import to_reference_frames
+    from humancal.tables.detections import detections_to_dense
 
     worker = stress_sweep._WORKER
     config, scene_row = scene_config(index, seed)

@@ -33,10 +33,8 @@ import torch
 
 from evaluation.contact_metrics import penetration_figures
 from humancal.association import associate, to_associations_table, to_skeletons_table
-from humancal.associations import Associations
 from humancal.body import BodyModel, RestSkeleton
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.fitting import BodyFitConfig, FittedMotions, body_observations, fit_bodies
 from humancal.keypoints import joint_indices
 from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
@@ -45,6 +43,8 @@ from humancal.synthetic import make_rig, preset, sample_people, simulate_detecti
 from humancal.synthetic.activities import activity_track, plan_activities
 from humancal.synthetic.motions import FOOT_JOINTS, Motions, person_pose
 from humancal.synthetic.paths import Paths, simulate_paths
+from humancal.tables.associations import Associations
+from humancal.tables.detections import DenseDetections
 
 _FOOT_INDEX = joint_indices(list(FOOT_JOINTS))
 _ANKLE_INDEX = joint_indices(["left_ankle", "right_ankle"])

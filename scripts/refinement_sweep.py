@@ -74,8 +74,8 @@ def perturbed(cameras: list, size: float, rng: np.random.Generator) -> list:
 
 def run_scene(job: tuple[int, int, tuple[str, ...], dict]) -> pd.DataFrame:
     import torch
-
     from calibration_sweep import calibrate, lift_with, scene_config
+
     from evaluation.camera_metrics import camera_metrics
     from evaluation.method_comparison import method_metric_table
     from evaluation.protocols import metrics_table
@@ -83,11 +83,11 @@ def run_scene(job: tuple[int, int, tuple[str, ...], dict]) -> pd.DataFrame:
     from humancal.body import BodyModel
     from humancal.calibration import CalibrationError, IntrinsicsConfig
     from humancal.camera import CameraRig
+    from humancal.datasets.sequences import SequenceSpec
     from humancal.fitting import BodyFitConfig
     from humancal.lifter import load_lifter, shipped_checkpoint
     from humancal.prior import shipped_prior
     from humancal.prior.weights import PriorWeightsError
-    from humancal.sequences import SequenceSpec
     from humancal.synthetic import generate_scene
 
     torch.set_num_threads(1)

@@ -6,7 +6,7 @@ lifter in crop frames and calibrated (``estimate_intrinsics`` with ``missing_upr
 ``estimate_extrinsics``) once per ``--variant``; prints each view's focal error against the truth and its status.
 
 Part 2 (``--valley``): on the first seed's scene, a bundle adjustment of the reprojection alone (the body fit's,
-``humancal.fitting.bundle.bundle_adjust``: free points, a negligible camera tie), started at the true cameras and
+``humancal.fitting.joint_bundle.bundle_adjust_on_joints``: free points, a negligible camera tie), started at the true cameras and
 at the calibration's, by L-BFGS for 100 / 1,000 / 3,000 iterations and by Levenberg-Marquardt to convergence; then one view's focal scaled by 0.85-1.15
 with the other cameras true and the extrinsics and points refitted. The truth is used here to ask what the data
 can determine (evaluation only; no method reads it).
@@ -57,8 +57,8 @@ def parse_variant(text: str) -> dict:
 def calibrate(scene, lifter, overrides: dict):
     from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
     from humancal.calibration.extrinsics_config import ExtrinsicsConfig
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections
+    from humancal.tables.detections import detections_to_dense
 
     dense = detections_to_dense(scene.detections)
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
@@ -74,9 +74,9 @@ def focal_errors_pct(cameras, truth) -> np.ndarray:
 def _observations(scene, rig, lifter):
     """The body fit's observations of the scene's detections, associated with ``rig``'s cameras."""
     from humancal.association import associate, to_associations_table, to_skeletons_table
-    from humancal.detections import detections_to_dense
     from humancal.fitting import body_observations
     from humancal.lifter import lift_detections
+    from humancal.tables.detections import detections_to_dense
 
     dense = detections_to_dense(scene.detections)
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores, K=rig.K[dense.view])
@@ -87,10 +87,10 @@ def _observations(scene, rig, lifter):
 def _reprojection_bundle(obs, start_rig, solver: str = "lm", iterations: int = 100):
     """Bundle adjustment of the reprojection alone (free points, a negligible camera tie), focal + extrinsics."""
     from humancal.fitting import BodyFitConfig
-    from humancal.fitting.bundle import bundle_adjust
+    from humancal.fitting.joint_bundle import bundle_adjust_on_joints
 
     config = BodyFitConfig(weight_camera_prior=1e-8, bundle_solver=solver)
-    return bundle_adjust(obs, start_rig, config, regime="int_ext", iterations=iterations)
+    return bundle_adjust_on_joints(obs, start_rig, config, regime="int_ext", iterations=iterations)
 
 
 def data_minimum(scene, lifter, calibrated) -> tuple[float, float]:
@@ -113,7 +113,7 @@ def valley(scene, start_cameras, lifter) -> None:
 
     from humancal.camera import CameraRig
     from humancal.fitting import BodyFitConfig
-    from humancal.fitting.bundle import bundle_adjust
+    from humancal.fitting.joint_bundle import bundle_adjust_on_joints
 
     torch.set_num_threads(2)
     truth = list(scene.rig)
@@ -133,7 +133,7 @@ def valley(scene, start_cameras, lifter) -> None:
         K = cameras[1].K.copy()
         K[:2, :2] *= scale
         cameras[1] = dataclasses.replace(cameras[1], K=K)
-        result = bundle_adjust(obs, CameraRig.from_cameras(cameras), config, regime="ext", iterations=1000)
+        result = bundle_adjust_on_joints(obs, CameraRig.from_cameras(cameras), config, regime="ext", iterations=1000)
         print(f"view 1 focal x {scale:.2f}, the others true, extrinsics and points refitted: mean reprojection "
               f"{result.reprojection_error_px:.3f} px")
 

@@ -57,7 +57,14 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from sweep_scoring import (  # noqa: E402,F401
-    SILENT_ANGLE_DEG, SILENT_FOCAL_PCT, calibrate_scene, quantiles, run_jobs, score_calibration, sweep_arguments)
+    SILENT_ANGLE_DEG,
+    SILENT_FOCAL_PCT,
+    calibrate_scene,
+    quantiles,
+    run_jobs,
+    score_calibration,
+    sweep_arguments,
+)
 
 BEHAVIOURS = ("mixed", "mixed", "seated", "low")
 """Scene ``i`` has behaviour ``BEHAVIOURS[i % 4]``."""
@@ -150,10 +157,10 @@ def _init_worker(lifter_specs: list[str], repair: bool = True, limbs: bool = Tru
 def run_scene(index: int, seed: int, views: int | None = None) -> dict:
     """Generate, lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}."""
     from humancal.calibration import ExtrinsicsConfig
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections
     from humancal.synthetic import generate_scene
     from humancal.synthetic.activities import ACTIVITIES
+    from humancal.tables.detections import detections_to_dense
 
     config, scene_row = scene_config(index, seed, views)
     lifter_seed, lifter = _WORKER["lifters"][(index // 4) % len(_WORKER["lifters"])]

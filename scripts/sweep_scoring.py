@@ -27,8 +27,13 @@ failure."""
 def _checks(cameras, people_m, floor_known: bool, body_size_ratio: float, per_view) -> list[str]:
     """The blocking checks of the pipeline's ``extrinsics`` asset that these cameras fail."""
     from humancal.camera import cameras_to_table
-    from humancal.validation import (check_body_size, check_cameras_valid, check_focal_plausible, check_rig_geometry,
-                                     check_views_agree)
+    from humancal.tables.plausibility import (
+        check_body_size,
+        check_cameras_valid,
+        check_focal_plausible,
+        check_rig_geometry,
+        check_views_agree,
+    )
 
     table = cameras_to_table(cameras, "sweep")
     reports = {"cameras_valid": check_cameras_valid(table), "focal_plausible": check_focal_plausible(table),
@@ -43,7 +48,7 @@ def _angles_aligned_with_axes(estimated, truth) -> np.ndarray:
     each optical axis. For three views: their triangle of centres alone leaves the alignment's rotation to the
     triangle's shape error (scene 94 of the sweep: 5.2 deg for each of three views whose relative rotations are
     within 0.8 deg of the truth); with two views the centres-only alignment already adds these points."""
-    from humancal.calibration.alignment import rig_alignment_points
+    from humancal.calibration.rig_alignment import rig_alignment_points
     from humancal.geometry.alignment import fit_similarity
     from humancal.geometry.rotations import rotation_distance_deg
 

@@ -21,15 +21,15 @@ import numpy as np
 from evaluation.metrics import pcp_correct
 from humancal.association import TrackingConfig, associate
 from humancal.association.track_smoothing import SmoothingConfig
-from humancal.associations import Associations
 from humancal.body import BodyModel
 from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
-from humancal.calibration.alignment import align_rig
+from humancal.calibration.rig_alignment import align_rig
 from humancal.camera import CameraRig
-from humancal.detections import detections_to_dense
 from humancal.keypoints import LIMB_INDEX
 from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
 from humancal.synthetic import generate_scene, preset
+from humancal.tables.associations import Associations
+from humancal.tables.detections import detections_to_dense
 
 
 def self_calibrated(scene, dense, lifted) -> tuple[list, object]:

@@ -34,10 +34,10 @@ import numpy as np
 from humancal.association.detection_geometry import DetectionGeometry, detection_geometry
 from humancal.camera import CameraRig
 from humancal.config import Config, at_least, in_range, positive
-from humancal.detections import DenseDetections
 from humancal.geometry.alignment import best_rotation_trace
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = [
     "AffinityConfig",

@@ -13,8 +13,8 @@ import cv2
 import numpy as np
 
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.keypoints import NUM_JOINTS
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["cluster_observations", "normal_equations", "reprojection_errors_px", "triangulate_clusters", "undistorted_keypoints_px"]
 

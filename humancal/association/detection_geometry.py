@@ -12,9 +12,9 @@ import cv2
 import numpy as np
 
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["DetectionGeometry", "detection_geometry"]
 

@@ -19,7 +19,7 @@ from humancal.association.cluster_triangulation import triangulate_clusters, und
 from humancal.association.cycle_matching import FrameMatching
 from humancal.association.tracking_config import TrackingConfig
 from humancal.camera import CameraRig, pinhole
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["MatchedClusters", "TriangulationInputs", "global_clusters", "triangulate_matchings"]
 

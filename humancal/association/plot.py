@@ -9,9 +9,9 @@ import numpy as np
 
 from humancal.association.tracking import AssociationResult
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.keypoints import LIMB_INDEX
 from humancal.plotting import pyplot, save_figure
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["association_frame", "plot_association"]
 

@@ -50,10 +50,10 @@ from humancal.association.track_smoothing import smooth_tracks
 from humancal.association.tracking_config import TrackingConfig
 from humancal.association.tracks import build_tracks, keep_tracks
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
-from humancal.tables import SCHEMAS, validate_table
+from humancal.tables.detections import DenseDetections
+from humancal.tables.schemas import SCHEMAS, validate_table
 
 __all__ = [
     "SKELETONS3D_SCHEMA",
@@ -68,7 +68,7 @@ logger = logging.getLogger(__name__)
 
 
 SKELETONS3D_SCHEMA = SCHEMAS["skeletons3d"]
-"""The ``skeletons3d`` table (registered in :mod:`humancal.tables`): the triangulated 3D joints of every person
+"""The ``skeletons3d`` table (registered in :mod:`humancal.tables.schemas`): the triangulated 3D joints of every person
 and frame, world metres, one row per (frame, person_id, joint); ``num_views`` views triangulated the joint in that
 frame (0 with ``valid`` True: filled from the track's neighbouring frames by the smoothing; 0 and NaN coordinates:
 missing, ``valid`` False)."""

@@ -10,12 +10,12 @@ Example:
 See ``docs/calibration.md`` for the method, the failure modes and measured figures.
 """
 
-from humancal.calibration.alignment import Similarity, align_rig
 from humancal.calibration.extrinsics import estimate_extrinsics
 from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
 from humancal.calibration.floor import FloorAlignment, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsConfig, IntrinsicsEstimate, estimate_intrinsics
 from humancal.calibration.plot import plot_rigs
+from humancal.calibration.rig_alignment import Similarity, align_rig
 from humancal.calibration.tables import intrinsics_from_table, intrinsics_to_table
 from humancal.calibration.types import CalibrationError, LiftedPoses
 

@@ -44,17 +44,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from humancal.calibration.bundle_terms import (
-    _Problem,
-    _focal_count,
-    _lens,
-    _log_focal,
-    _unpack,
-    _residuals,
-    _robust_cost,
-    _normal_equations,
-    _solve,
-)
 from humancal.calibration.bundle_setup import (
     BundleSetup,
     bundle_setup,
@@ -62,12 +51,23 @@ from humancal.calibration.bundle_setup import (
     free_parameters,
     start_cameras,
 )
+from humancal.calibration.bundle_terms import (
+    _focal_count,
+    _lens,
+    _log_focal,
+    _normal_equations,
+    _Problem,
+    _residuals,
+    _robust_cost,
+    _solve,
+    _unpack,
+)
 from humancal.calibration.bundle_uncertainty import camera_std
 from humancal.calibration.types import CalibrationError
-from humancal.lifter.lifted import LiftedPoses
-from humancal.detections import DenseDetections
 from humancal.geometry.rotations import rotvec_to_rotmat
 from humancal.least_squares import Damping, Stop, levenberg_marquardt
+from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["BundleResult", "bundle_adjust", "focal_bounds_from_fov"]
 

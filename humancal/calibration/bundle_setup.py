@@ -12,8 +12,8 @@ import numpy as np
 
 from humancal.calibration.bundle_terms import _camera_params, _focal_count, _focal_parameters, _Problem
 from humancal.calibration.types import CalibrationError
-from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["BundleSetup", "bundle_setup", "check_start", "free_parameters", "start_cameras"]
 

@@ -30,8 +30,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
+from humancal.calibration.bundle import focal_bounds_from_fov
 from humancal.calibration.extrinsics_bundle import bundle_stage
+from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
 from humancal.calibration.extrinsics_report import group_table, pair_table, per_view_table
 from humancal.calibration.extrinsics_start import (
     Problem,
@@ -47,13 +48,12 @@ from humancal.calibration.floor import NoFloorError, align_to_floor
 from humancal.calibration.intrinsics import IntrinsicsEstimate
 from humancal.calibration.known_cameras import anchor_to_known, known_rig_estimate, with_known_intrinsics
 from humancal.calibration.lens import lens_step
-from humancal.calibration.bundle import focal_bounds_from_fov
 from humancal.calibration.types import CalibrationError, LiftedPoses, check_lifted, hip_midpoints
 from humancal.calibration.view_repair import RepairInputs, calibration_adjuster, check_and_repair_views
 from humancal.calibration.world_scale import body_size_ratio, people_scale_factor
 from humancal.camera import Camera, CameraRig
-from humancal.detections import DenseDetections
 from humancal.lifter.pose_cues import standing_score
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["estimate_extrinsics"]
 

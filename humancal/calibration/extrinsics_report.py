@@ -8,7 +8,7 @@ import logging
 import numpy as np
 import pandas as pd
 
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["group_table", "pair_table", "per_view_table"]
 

@@ -21,7 +21,7 @@ from humancal.calibration.translations import root_positions, solve_focals_trans
 from humancal.calibration.types import CalibrationError, LiftedPoses
 from humancal.calibration.view_graph import check_view_graph
 from humancal.camera import Camera, CameraRig, intrinsic_matrices
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["LinearStart", "Problem", "blind_view_start", "camera_matrices", "cameras_of", "initial_points",
            "linear_start", "matched_groups", "numerical_stage", "require_finite"]

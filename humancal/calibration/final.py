@@ -14,15 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from humancal.calibration.lens import undistorted_detections
 from humancal.calibration.view_agreement import (
     AgreementConfig,
     agreement_with_people,
     isolate_disagreeing_views,
     person_clusters,
 )
-from humancal.calibration.lens import undistorted_detections
 from humancal.camera import CameraRig, pinhole
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["FinalCameras", "choose_final_cameras", "FINAL_SOURCES"]
 
@@ -48,7 +48,7 @@ class FinalCameras:
 
     @property
     def per_view(self) -> pd.DataFrame:
-        """The agreement in the columns :func:`humancal.validation.check_views_agree` reads (the focal lengths'
+        """The agreement in the columns :func:`humancal.tables.plausibility.check_views_agree` reads (the focal lengths'
         uncertainty is the calibration's business: not judged again here)."""
         a = self.agreement
         return pd.DataFrame({"view": a["view"], "focal_px": self.rig.K[:, 0, 0], "focal_rel_std": 0.0,

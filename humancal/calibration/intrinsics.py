@@ -41,7 +41,7 @@ from humancal.calibration.types import (
 from humancal.calibration.vanishing import VanishingPoint, fit_vertical_vanishing_point
 from humancal.camera import intrinsic_matrix
 from humancal.config import Config, at_least, in_range, positive
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["IntrinsicsConfig", "IntrinsicsEstimate", "estimate_intrinsics", "upright_candidates"]
 

@@ -21,17 +21,17 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from humancal.calibration.alignment import align_rig
+from humancal.calibration.bundle import BundleResult
 from humancal.calibration.extrinsics_config import ExtrinsicsConfig, ExtrinsicsDiagnostics, ExtrinsicsEstimate
 from humancal.calibration.intrinsics import IntrinsicsEstimate
-from humancal.calibration.bundle import BundleResult
 from humancal.calibration.regroup import regroup_with_cameras
+from humancal.calibration.rig_alignment import align_rig
 from humancal.calibration.types import hip_midpoints
 from humancal.calibration.view_agreement import view_agreement
 from humancal.calibration.world_scale import body_size_ratio
 from humancal.camera import Camera, CameraRig
-from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["KNOWN_FOCAL_REL_STD", "anchor_to_known", "known_rig_estimate", "with_known_intrinsics"]
 

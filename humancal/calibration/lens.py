@@ -29,9 +29,9 @@ import pandas as pd
 from humancal.calibration.bundle import BundleResult, bundle_adjust
 from humancal.calibration.view_repair import check_and_repair_views
 from humancal.camera import intrinsic_matrices
-from humancal.detections import DenseDetections
 from humancal.geometry.projection import undistort_points_px
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["LENS_MODELS", "LensChoice", "choose_lens", "frame_folds", "lens_fit", "lens_step", "undistorted_detections"]
 

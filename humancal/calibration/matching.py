@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from humancal.detections import DenseDetections
+    from humancal.tables.detections import DenseDetections
 
 __all__ = ["drop_mismatched_detections", "groups_from_pairs", "spread_groups"]
 

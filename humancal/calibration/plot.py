@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from humancal.calibration.alignment import align_rig
+from humancal.calibration.rig_alignment import align_rig
 from humancal.camera import CameraRig
 from humancal.plotting import pyplot, save_figure
 
@@ -34,7 +34,7 @@ def plot_rigs(
     """Write a PNG with the top (x-y) and side (x-z) views of the rigs.
 
     When ``ground_truth`` is given, the estimated rig (and ``floor_points``, which live in its world) is first
-    brought onto it by the similarity of the camera centres (:func:`~humancal.calibration.alignment.align_rig`).
+    brought onto it by the similarity of the camera centres (:func:`~humancal.calibration.rig_alignment.align_rig`).
 
     Args:
         estimated: the calibrated rig.

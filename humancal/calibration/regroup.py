@@ -22,9 +22,9 @@ import numpy as np
 
 from humancal.association import SmoothingConfig, TrackingConfig, associate
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["Regrouping", "regroup_with_cameras"]
 

@@ -20,8 +20,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from humancal.camera import Camera, intrinsic_matrix
-from humancal.detections import DenseDetections
 from humancal.geometry.rotations import rotmat_to_rotvec, rotvec_to_rotmat
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["Reregistration", "reregister_view"]
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from humancal.calibration.types import CalibrationError, LiftedPoses
-from humancal.detections import DenseDetections
 from humancal.geometry.rotations import project_to_rotmat, rotation_angle_deg, rotmat_to_quat_xyzw
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["PairRotation", "pairwise_rotations", "average_rotations", "procrustes_rotations"]
 

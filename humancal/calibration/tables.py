@@ -1,4 +1,4 @@
-"""The calibration stage's results as canonical tables (``humancal.tables``): ``intrinsics`` and back."""
+"""The calibration stage's results as canonical tables (``humancal.tables.schemas``): ``intrinsics`` and back."""
 
 from __future__ import annotations
 

@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 
 from humancal.calibration.translation_pairs import conditioned_system, focal_stds, pair_system, reweighted_passes
 from humancal.calibration.types import LiftedPoses
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 __all__ = [
     "RootPositions",

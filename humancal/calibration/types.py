@@ -3,16 +3,16 @@
 The calibration stage consumes, for every 2D detection, a 3D pose lifted from it: the lifter's
 :class:`~humancal.lifter.LiftedPoses` (the canonical 23 keypoints, root-relative, metres, in the detection's
 crop or camera frame, plus the person's standing height and an upright-standing score), row-aligned with the
-:class:`~humancal.detections.DenseDetections` it was lifted from.
+:class:`~humancal.tables.detections.DenseDetections` it was lifted from.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from humancal.detections import DenseDetections
 from humancal.keypoints import JOINT_INDEX
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = [
     "CalibrationError",

@@ -33,9 +33,9 @@ import pandas as pd
 
 from humancal.camera import Camera, CameraRig
 from humancal.config import Config, at_least, in_range, positive
-from humancal.detections import DenseDetections
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import NUM_JOINTS
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["AgreementConfig", "VIEW_VERDICTS", "view_agreement", "groups_by_view", "person_clusters",
            "agreement_with_people", "isolate_disagreeing_views"]

@@ -30,8 +30,8 @@ from humancal.calibration.regroup import regroup_with_cameras
 from humancal.calibration.reregister import reregister_view
 from humancal.calibration.view_agreement import AgreementConfig, isolate_disagreeing_views, view_agreement
 from humancal.camera import Camera, CameraRig, intrinsic_matrices, intrinsic_matrix
-from humancal.detections import DenseDetections
 from humancal.lifter.lifted import LiftedPoses
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["Adjust", "RepairInputs", "ViewRepair", "agreement_of", "calibration_adjuster", "cameras_of",
            "check_and_repair_views", "people_groups"]

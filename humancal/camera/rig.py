@@ -16,7 +16,7 @@ import torch
 
 from humancal.camera.model import Camera, intrinsic_matrices
 from humancal.geometry.projection import project_points_np, project_points_torch
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = [
     "CameraRig",

@@ -25,7 +25,7 @@ from humancal.formats.detections.checks import (
     off_image,
 )
 from humancal.formats.detections.skeleton_fit import check_skeleton_fit
-from humancal.tables import empty_table, validate_table
+from humancal.tables.schemas import empty_table, validate_table
 
 __all__ = ["Capture", "CaptureSummary", "load_capture", "view_name"]
 

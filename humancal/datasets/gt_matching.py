@@ -22,7 +22,7 @@ import pandas as pd
 from scipy.optimize import linear_sum_assignment
 
 from humancal.camera import Camera, CameraRig, project_points
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = ["GroundTruthMatch", "match_ground_truth"]
 
@@ -72,7 +72,7 @@ def match_ground_truth(
 
     Raises:
         ValueError: no shared joint names, views without a camera, or bad parameters.
-        humancal.tables.TableError: a table does not match its schema.
+        humancal.tables.schemas.TableError: a table does not match its schema.
     """
     detections = validate_table(detections, "detections", source="match_ground_truth detections")
     gt_poses = validate_table(gt_poses, "poses3d", source="match_ground_truth gt_poses")

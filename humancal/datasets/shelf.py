@@ -20,7 +20,7 @@ from humancal.formats import FormatError, get_skeleton, read_cameras
 from humancal.formats.detections.table import IMAGE_SIZE_ATTR
 from humancal.grouping import CandidateFrame, GroupingConfig, group_detections
 from humancal.grouping.body25 import BODY25_JOINTS, BODY25_LIMBS
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = [
     "SHELF15_JOINTS",

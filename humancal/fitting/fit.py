@@ -15,7 +15,7 @@ interpenetration of different people (``humancal.fitting.contact``); and, when t
 each camera to its initial value.
 
 Schedule: when the cameras move, they first take a bundle adjustment on the triangulated joints as free points
-(``BodyFitConfig.bundle_start``, :func:`humancal.fitting.bundle.bundle_adjust`: the ``separate`` baseline's
+(``BodyFitConfig.bundle_start``, :func:`humancal.fitting.joint_bundle.bundle_adjust_on_joints`: the ``separate`` baseline's
 cameras), and the joint refinement starts from there (chosen on synthetic scenes whose detector has its own
 definition of the joints, where a body cannot explain what free points can; ``docs/refinement.md``). The root of
 each frame starts from a rigid alignment of the average body onto the triangulated
@@ -52,10 +52,10 @@ import torch
 from torch import Tensor
 
 from humancal.body import BodyModel
-from humancal.camera import CameraRig
 from humancal.calibration.types import FOOT_JOINTS
-from humancal.fitting.bundle import bundle_adjust
+from humancal.camera import CameraRig
 from humancal.fitting.config import BodyFitConfig
+from humancal.fitting.joint_bundle import bundle_adjust_on_joints
 from humancal.fitting.motions import FittedMotions
 from humancal.fitting.observations import BodyObservations, FittingInputError, unswap_left_right
 from humancal.fitting.problem import INITIAL_PHENOTYPES, BodyFitProblem, run_stage
@@ -178,7 +178,7 @@ def _start_cameras(observations: BodyObservations, rig: CameraRig, config: BodyF
     fit's ``time.perf_counter()`` start."""
     if not (config.bundle_start and config.cameras != "fixed"):
         return _CameraStart(rig)
-    bundle = bundle_adjust(observations, rig, config, regime=config.cameras)
+    bundle = bundle_adjust_on_joints(observations, rig, config, regime=config.cameras)
     seconds = time.perf_counter() - start
     if bundle.failure:
         log.warning("body fit: %s", bundle.failure)

@@ -16,7 +16,7 @@ import pandas as pd
 from humancal.body import PHENOTYPE_NAMES
 from humancal.body.bones import POSED_BONE_NAMES
 from humancal.keypoints import NUM_JOINTS
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = ["FittedMotions"]
 

@@ -12,10 +12,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from humancal.associations import Associations
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.keypoints import FLIP_INDEX, JOINT_INDEX, NUM_JOINTS
+from humancal.tables.associations import Associations
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["BodyObservations", "FittingInputError", "body_observations", "unswap_left_right"]
 

@@ -25,7 +25,7 @@ from humancal.fitting.contact import interpenetration
 from humancal.fitting.observations import BodyObservations
 from humancal.fitting.schedule import upsample_frames
 from humancal.prior.config import NUM_PRIOR_BONES
-from humancal.prior.fitting import KeypointObservations, initial_root
+from humancal.prior.latent_fit import KeypointObservations, initial_root
 from humancal.prior.model import MotionVAE, identity_pose6d, pose6d_to_rotmats, rotmats_to_pose6d, with_root
 from humancal.prior.windows import window_layout
 

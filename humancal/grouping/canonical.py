@@ -14,7 +14,7 @@ from humancal.formats.joint_mapping import to_canonical
 from humancal.grouping.candidates import CandidateFrame
 from humancal.grouping.greedy import GroupedPeople, GroupingConfig, group_frame
 from humancal.keypoints import CANONICAL_JOINTS
-from humancal.tables import empty_table, validate_table
+from humancal.tables.schemas import empty_table, validate_table
 
 __all__ = ["group_detections", "people_to_detections"]
 

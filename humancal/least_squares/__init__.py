@@ -3,7 +3,7 @@
 One damped Gauss-Newton iteration (:func:`levenberg_marquardt`, with its :class:`Damping` schedule and :class:`Stop`
 rule) and one Schur-complement step (:func:`solve_damped` on an :class:`ArrowSystem`) serve every least-squares
 problem of the library: the calibration's bundle adjustment over people (:mod:`humancal.calibration.bundle`), the
-refinement's bundle adjustment over triangulated points (:mod:`humancal.fitting.bundle`), and the retargeting's
+refinement's bundle adjustment over triangulated points (:mod:`humancal.fitting.joint_bundle`), and the retargeting's
 per-frame pose solve and its pose-and-offset solve (:mod:`humancal.retarget.levenberg`,
 :mod:`humancal.retarget.offsets`). Each problem writes only its residuals and their derivatives.
 

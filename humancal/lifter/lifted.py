@@ -1,7 +1,7 @@
 """The lifted 3D poses of a set of detections: the one type the lifter returns and the calibration reads.
 
 Row ``d`` of a :class:`LiftedPoses` belongs to row ``d`` of the
-:class:`~humancal.detections.DenseDetections` it was lifted from. Poses come in each detection's *crop frame*
+:class:`~humancal.tables.detections.DenseDetections` it was lifted from. Poses come in each detection's *crop frame*
 (``humancal.lifter.features``: the camera frame turned to look straight at the detection's box centre) while
 the intrinsics are unknown, and in the view's camera frame once :meth:`LiftedPoses.in_camera_frame` has turned
 them.

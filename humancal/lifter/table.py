@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from humancal.detections import DenseDetections, detections_to_dense
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, NUM_JOINTS
-from humancal.lifter.infer import Lifter, LiftedPoses, lift_detections
+from humancal.lifter.infer import LiftedPoses, Lifter, lift_detections
+from humancal.tables.detections import DenseDetections, detections_to_dense
 
 __all__ = ["lift_detections_table", "lifted_to_table", "lifted_from_table"]
 

@@ -8,7 +8,7 @@ from humancal.mocap.asf_amc import CMU_FPS, asf_rest_positions, read_amc
 from humancal.mocap.bvh import CMU_DAZ_LEADING_FRAMES, BvhJoint, BvhMotion, bvh_forward_kinematics, parse_bvh, read_bvh
 from humancal.mocap.clip import MocapClip, MocapFormatError
 from humancal.mocap.duplicates import identical_files
-from humancal.mocap.kinematics import R_ZUP_FROM_YUP, euler_rotmat
+from humancal.mocap.reading import R_ZUP_FROM_YUP, euler_rotmat
 
 __all__ = [
     "MocapClip",

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from humancal.mocap.clip import MocapFormatError
-from humancal.mocap.kinematics import read_text_lines
+from humancal.mocap.reading import read_text_lines
 
 __all__ = ["AsfBone", "AsfSkeleton", "read_asf", "INCH_M"]
 

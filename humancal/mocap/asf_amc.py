@@ -21,7 +21,7 @@ import numpy as np
 
 from humancal.mocap.asf import AsfBone, AsfSkeleton, read_asf
 from humancal.mocap.clip import MocapClip, MocapFormatError
-from humancal.mocap.kinematics import (
+from humancal.mocap.reading import (
     R_ZUP_FROM_YUP,
     clip_name_and_subject,
     euler_rotmat,
@@ -245,7 +245,7 @@ def read_amc(
     Returns:
         The clip: joints ``root`` and the end of every bone (named after the bone; ``ltibia`` is the left
         ankle, ``lfemur`` the left knee, ``head`` the top of the head bone), file Y up turned Z up by
-        :data:`humancal.mocap.kinematics.R_ZUP_FROM_YUP`.
+        :data:`humancal.mocap.reading.R_ZUP_FROM_YUP`.
 
     Raises:
         FileNotFoundError: no such file.

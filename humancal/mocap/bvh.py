@@ -24,7 +24,7 @@ import numpy as np
 
 from humancal.mocap.bvh_hierarchy import BvhJoint, parse_hierarchy
 from humancal.mocap.clip import MocapClip, MocapFormatError
-from humancal.mocap.kinematics import (
+from humancal.mocap.reading import (
     R_ZUP_FROM_YUP,
     clip_name_and_subject,
     euler_rotmat,

@@ -14,7 +14,7 @@ Denoising and completion (:func:`denoising_benchmark`): fixed segments of held-o
   1.5 m high, 1000 px focal length) with 5 px Gaussian noise per coordinate (30 mm at 6 m) and 20 % missing per
   view,
 
-and fitted with the known shapes (:func:`humancal.prior.fitting.fit_motion`): once through each prior's latents,
+and fitted with the known shapes (:func:`humancal.prior.latent_fit.fit_motion`): once through each prior's latents,
 once through raw joint angles. Errors are against the clean keypoints, in the world frame (the root is fitted too).
 
 Acceleration error: the mean over frames and keypoints of ``|| a_pred - a_true ||`` with ``a[t] = x[t+1] - 2 x[t]
@@ -34,13 +34,12 @@ import torch
 from torch import Tensor
 
 from humancal.body import BodyModel
-from humancal.camera import Camera, CameraRig, intrinsic_matrices
+from humancal.camera import Camera, CameraRig, intrinsic_matrices, look_at
 from humancal.geometry.pose_errors import mpjpe_mm
-from humancal.prior.fitting import FitConfig, KeypointObservations, fit_motion
+from humancal.prior.latent_fit import FitConfig, KeypointObservations, fit_motion
 from humancal.prior.model import MotionVAE, pose6d_to_rotmats, rotmats_to_pose6d, with_root
 from humancal.prior.windows import reconstruct_in_windows
 from humancal.retarget import RetargetedClip
-from humancal.camera import look_at
 
 __all__ = [
     "DENOISE_FIT_CONFIGS",

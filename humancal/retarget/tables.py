@@ -11,13 +11,13 @@ import torch
 from humancal.body import PHENOTYPE_NAMES, BodyModel
 from humancal.keypoints import NUM_JOINTS
 from humancal.retarget.clips import NUM_POSED_BONES, RetargetedClip
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = ["clips_to_motions_table", "motions_table_to_clips", "residual_summary", "pooled_residual_mm"]
 
 
 def clips_to_motions_table(clips: Sequence[RetargetedClip]) -> pd.DataFrame:
-    """The canonical "motions" table (``humancal.tables``): one row per clip and frame, ``person_id = 0``.
+    """The canonical "motions" table (``humancal.tables.schemas``): one row per clip and frame, ``person_id = 0``.
 
     ``sequence`` is the clip name; ``bone_rotmats_local`` holds the 22 row-major 3x3 matrices (198 values),
     ``keypoints_world_m`` the 23 keypoints (69 values).

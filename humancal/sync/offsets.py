@@ -41,9 +41,9 @@ import numpy as np
 import pandas as pd
 
 from humancal.config import Config, in_range, positive
-from humancal.detections import detections_to_dense
 from humancal.sync.correlation import ClockTracks, LagPeak, correlate_views, find_peak, pose_distance, resample_tracks
 from humancal.sync.signals import SIGNAL_KINDS, track_signals
+from humancal.tables.detections import detections_to_dense
 
 __all__ = ["STATUSES", "SyncConfig", "PairOffset", "TimeOffsets", "estimate_time_offsets",
            "estimate_time_offsets_lifted", "per_view_fps"]
@@ -229,7 +229,7 @@ def estimate_time_offsets_lifted(dense, rates: np.ndarray, joints_m: np.ndarray 
     """:func:`estimate_time_offsets` on dense detections already lifted.
 
     Args:
-        dense: the capture's :class:`humancal.detections.DenseDetections` (views ``0 .. V-1``).
+        dense: the capture's :class:`humancal.tables.detections.DenseDetections` (views ``0 .. V-1``).
         rates: (V,) frames per second of each view.
         joints_m: (D, 23, 3) the lifter's root-relative poses row-aligned with ``dense``, metres (None for the
             ``"2d"`` signal).

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from humancal.detections import DenseDetections
 from humancal.geometry.rotations import angle_between_deg
 from humancal.keypoints import JOINT_INDEX
 from humancal.sync.tracks import link_view_tracks, person_size_px
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["SIGNAL_KINDS", "TrackSignals", "joint_distances", "pose_features", "track_signals"]
 

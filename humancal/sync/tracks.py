@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from humancal.detections import DenseDetections
 from humancal.keypoints import FLIP_INDEX
+from humancal.tables.detections import DenseDetections
 
 __all__ = ["link_view_tracks", "person_size_px"]
 

@@ -30,7 +30,7 @@ from humancal.synthetic.motions import Motions, generate_motions
 from humancal.synthetic.noise import DetectorOutput, draw_keypoint_bias, simulate_detections, simulate_view_detections
 from humancal.synthetic.people import People, sample_people
 from humancal.synthetic.rigs import make_rig
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = ["SyntheticScene", "generate_scene", "ProgressCallback"]
 
@@ -46,7 +46,7 @@ _JOINT_NAMES = np.array(CANONICAL_JOINTS, dtype=object)
 class SyntheticScene:
     """A generated scene with ground truth for everything.
 
-    Tables (pandas DataFrames, validated against ``humancal.tables.SCHEMAS``):
+    Tables (pandas DataFrames, validated against ``humancal.tables.schemas.SCHEMAS``):
 
     Attributes:
         detections: canonical ``detections``: one row per reported joint; ``det_id`` is a random

@@ -31,7 +31,11 @@ FLAGS = {"image_size": "--image-size", "skeleton": "--skeleton", "cameras_format
 
 def add_parser(subparsers) -> None:
     """Add the ``add`` command to the CLI's subparsers."""
-    from pipelines.cli.format_names import CAMERA_FORMATS, COCO_SKELETONS, OPENPOSE_SKELETONS  # light: --help stays fast
+    from pipelines.cli.format_names import (  # light: --help stays fast
+        CAMERA_FORMATS,
+        COCO_SKELETONS,
+        OPENPOSE_SKELETONS,
+    )
 
     p = subparsers.add_parser(
         "add", help="register your own capture (OpenPose JSON folders or COCO keypoint files, one per view)",
@@ -89,9 +93,9 @@ def cmd_add(args: argparse.Namespace) -> int:
     """Validate the capture, write it into the user datasets file, register its partition, print a summary."""
     import dataclasses
 
-    from humancal.captures.options import parse_named_numbers
     from humancal.captures import CaptureConfig, load_capture, parse_image_size, parse_principal_point
-    from humancal.sequences import (
+    from humancal.captures.options import parse_named_numbers
+    from humancal.datasets.sequences import (
         DatasetsConfigError,
         add_user_sequence,
         load_datasets_config,

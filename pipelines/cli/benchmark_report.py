@@ -62,8 +62,8 @@ def benchmark_for_report(root: str, partitions: list[str] | None) -> tuple[pd.Da
     """The benchmark table to report and a line saying where it comes from."""
     from evaluation.benchmark import benchmark_table
     from evaluation.paper_results import paper_results, peer_results
+    from humancal.tables.schemas import SCHEMAS
     from resources.io_managers import partition_path
-    from humancal.tables import SCHEMAS
 
     stored = partition_path(root, "benchmark_table", None)
     if stored.exists():

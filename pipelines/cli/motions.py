@@ -12,8 +12,8 @@ __all__ = ["export_stored_motions"]
 
 
 def _sequence_fps(partition: str) -> tuple[float, str]:
-    """The frame rate of a partition's sequence and where it comes from (``humancal.inputs.sequence_fps``)."""
-    from humancal.inputs import sequence_fps
+    """The frame rate of a partition's sequence and where it comes from (``humancal.datasets.inputs.sequence_fps``)."""
+    from humancal.datasets.inputs import sequence_fps
     from pipelines.definitions import defs
 
     fps, source = sequence_fps(defs.resources["datasets"].spec(partition))

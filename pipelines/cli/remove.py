@@ -3,7 +3,7 @@
 In this order, so that an interrupted removal can be run again and finishes the job:
 
 1. the dataset (or one sequence) leaves the user datasets file ``<state dir>/datasets.yaml``, atomically
-   (``humancal.sequences.remove_user_sequences``): from then on no command registers its partitions again;
+   (``humancal.datasets.sequences.remove_user_sequences``): from then on no command registers its partitions again;
 2. its partitions ``NAME__SEQ`` leave the instance's dynamic partitions, and their materialization history is
    wiped (the Dagster UI no longer lists them);
 3. its artifacts ``<state dir>/artifacts/*/NAME__SEQ.*`` are deleted, and the fan-in tables that held its rows
@@ -26,7 +26,7 @@ FAN_IN_TABLES = ("benchmark_table", "stage_timings")
 
 
 def cmd_remove(args) -> int:
-    from humancal.sequences import DatasetsConfigError, remove_user_sequences, user_config_path
+    from humancal.datasets.sequences import DatasetsConfigError, remove_user_sequences, user_config_path
     from humancal.settings import state_dir
 
     state = state_dir()

@@ -123,7 +123,7 @@ def _round_printer(out: Output):
 
 
 def _user_datasets() -> set[str]:
-    from humancal.sequences import load_datasets_config, user_config_path
+    from humancal.datasets.sequences import load_datasets_config, user_config_path
 
     user = str(user_config_path())
     try:

@@ -47,7 +47,7 @@ def _optional(asset: str, partition: str):
 
 def _footage(partition: str, view_names: list[str], videos: list[str] | None):
     """Per view its footage (``--videos``, else the capture's own), or None when there is none."""
-    from humancal.inputs import capture_footage
+    from humancal.datasets.inputs import capture_footage
     from humancal.viewing.footage import footage_for_views
     from pipelines.definitions import defs
 

@@ -8,7 +8,7 @@ import pandas as pd
 
 from assets.calibration import _focal_constrained_report, _single_view_focal_report, _upright_report
 from assets.checks import check_result
-from humancal.validation import CheckReport
+from humancal.tables.plausibility import CheckReport
 
 
 def _intrinsics(status: list[str], candidates: list[int] | None = None) -> pd.DataFrame:

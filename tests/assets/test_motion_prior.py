@@ -18,7 +18,7 @@ from assets.motion_prior import (
 )
 from humancal.prior import PRIOR_VARIANTS, PriorConfig
 from humancal.retarget import RetargetedClip, clips_to_motions_table
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 from pipelines.definitions import build_definitions
 from resources.body_model import BodyModelResource
 from resources.io_managers import CheckpointIOManagerFactory, ParquetIOManagerFactory, checkpoint_content_version

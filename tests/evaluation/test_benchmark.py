@@ -10,7 +10,7 @@ from evaluation.benchmark import (
     benchmark_table,
     stage_timings_markdown,
 )
-from humancal.tables import SCHEMAS
+from humancal.tables.schemas import SCHEMAS
 
 
 def _rows(dataset, sequence, method, figures, failed=None, view=None):

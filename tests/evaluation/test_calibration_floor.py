@@ -7,7 +7,7 @@ from evaluation.calibration_floor import self_calibration_floor
 from evaluation.camera_metrics import camera_errors
 from humancal.camera import Camera, CameraRig, project_points
 from humancal.fitting import BodyFitConfig
-from humancal.fitting.bundle import bundle_adjust
+from humancal.fitting.joint_bundle import bundle_adjust_on_joints
 from humancal.fitting.observations import BodyObservations
 from tests.evaluation.test_camera_metrics import _rig
 
@@ -105,7 +105,7 @@ def test_self_calibration_floor_is_where_the_pipelines_own_bundle_adjustment_lan
         K = cam.K.copy()
         K[:2, 2] = (cam.width_px / 2.0, cam.height_px / 2.0)
         start.append(Camera(K, cam.R_cam_from_world, cam.t_cam_from_world_m, cam.width_px, cam.height_px))
-    result = bundle_adjust(_exact_observations(truth, points), CameraRig.from_cameras(start),
+    result = bundle_adjust_on_joints(_exact_observations(truth, points), CameraRig.from_cameras(start),
                            BodyFitConfig(weight_camera_prior=1e-8, bundle_solver="lm", bundle_max_frames=10**6),
                            regime="int_ext", iterations=200)
     pipeline = camera_errors(result.cameras.to_cameras(), truth)

@@ -12,7 +12,7 @@ from evaluation.camera_metrics import (
     centred_principal_point_floor,
     reprojection_errors_per_view,
 )
-from humancal.calibration.alignment import Similarity
+from humancal.calibration.rig_alignment import Similarity
 from humancal.camera import Camera, project_points
 from humancal.keypoints import CANONICAL_JOINTS
 

@@ -8,7 +8,7 @@ import pytest
 
 from evaluation.detection_quality import evaluate_grouping
 from humancal.camera import Camera, project_points
-from humancal.tables import TableError, validate_table
+from humancal.tables.schemas import TableError, validate_table
 
 JOINTS = [
     "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",

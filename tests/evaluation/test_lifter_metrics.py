@@ -5,10 +5,10 @@ import pandas as pd
 import pytest
 
 from evaluation.lifter_metrics import lifter_metrics_table, shelf_heights_m, true_heights_m
-from humancal.detections import detections_to_dense
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX
 from humancal.lifter import LiftedPoses, R_crop_from_cam, lifted_to_table, normalize_detections
-from humancal.tables import empty_table, validate_table
+from humancal.tables.detections import detections_to_dense
+from humancal.tables.schemas import empty_table, validate_table
 
 UPRIGHT_FRAMES = 5
 _HIPS = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]

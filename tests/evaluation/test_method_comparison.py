@@ -25,7 +25,7 @@ def test_known_principal_point_diagnostic_takes_only_the_principal_point_from_th
 @pytest.mark.slow  # 30 s; the default run meets the row in tests/pipelines/test_association_assets.py
 def test_convention_floor_row_scores_the_best_centred_cameras_without_a_fit():
     from evaluation.method_comparison import method_metric_table
-    from humancal.sequences import SequenceSpec
+    from humancal.datasets.sequences import SequenceSpec
 
     rng = np.random.default_rng(0)
     truth = []

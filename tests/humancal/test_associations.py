@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from humancal.associations import Associations
+from humancal.tables.associations import Associations
 
 
 def _table():

@@ -106,7 +106,7 @@ def test_shelf_openpose_detections_fit_body25_and_not_body25b(tmp_path):
 
 
 def _dense(table: pd.DataFrame) -> np.ndarray:
-    from humancal.detections import detections_to_dense
+    from humancal.tables.detections import detections_to_dense
 
     return detections_to_dense(table).keypoints_px
 

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from humancal.long_tables import name_codes, unique_rows
+from humancal.tables.pivot import name_codes, unique_rows
 
 
 @pytest.mark.parametrize("low, high", [(0, 5), (-3, 4), (0, 2**40)])
@@ -33,7 +33,7 @@ def test_name_codes_marks_unknown_and_missing_names():
 
 
 def test_has_repeats():
-    from humancal.long_tables import has_repeats
+    from humancal.tables.pivot import has_repeats
 
     assert not has_repeats(np.array([0, 3, 1]), 4)
     assert has_repeats(np.array([0, 3, 3]), 4)

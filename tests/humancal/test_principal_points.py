@@ -3,8 +3,8 @@
 import pytest
 
 from humancal.captures import CaptureConfig, parse_principal_point, principal_points_option
-from humancal.inputs import sequence_principal_points
-from humancal.sequences import SequenceSpec
+from humancal.datasets.inputs import sequence_principal_points
+from humancal.datasets.sequences import SequenceSpec
 
 SIZES = [(1920, 1080), (1280, 720)]
 

@@ -1,6 +1,11 @@
 import pytest
 
-from humancal.sequences import DatasetsConfigError, available_sequences, load_datasets_config, parse_partition_key
+from humancal.datasets.sequences import (
+    DatasetsConfigError,
+    available_sequences,
+    load_datasets_config,
+    parse_partition_key,
+)
 
 
 def _write(tmp_path, text):

@@ -2,7 +2,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from humancal.tables import SCHEMAS, TableError, empty_table, to_arrow, validate_table
+from humancal.tables.schemas import SCHEMAS, TableError, empty_table, to_arrow, validate_table
 
 
 def _detections(**overrides):

@@ -5,13 +5,13 @@ import pandas as pd
 import pytest
 
 from humancal.camera import Camera, cameras_to_table
-from humancal.validation import (
+from humancal.tables.plausibility import (
     CheckReport,
+    check_body_size,
     check_cameras_valid,
     check_detections_plausible,
     check_focal_plausible,
     check_rig_geometry,
-    check_body_size,
 )
 
 
@@ -117,7 +117,7 @@ def test_a_report_that_examined_nothing_cannot_pass():
 
 
 def test_no_detections_at_all_fails():
-    from humancal.tables import empty_table
+    from humancal.tables.schemas import empty_table
 
     views = pd.DataFrame({"view": [0], "width_px": [640], "height_px": [480]})
     report = check_detections_plausible(empty_table("detections"), views)

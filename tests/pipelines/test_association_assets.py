@@ -10,7 +10,7 @@ import pytest
 
 from evaluation.association_metrics import identity_metrics
 from humancal.synthetic import generate_scene, preset
-from humancal.tables import SCHEMAS, to_arrow
+from humancal.tables.schemas import SCHEMAS, to_arrow
 from pipelines.definitions import build_definitions
 from pipelines.partitions import SEQUENCES
 from resources.datasets import DatasetsResource

@@ -5,11 +5,11 @@ import dagster as dg
 import pandas as pd
 import pyarrow.parquet as pq
 
+from humancal.tables.schemas import to_arrow
 from pipelines.definitions import build_definitions
 from pipelines.partitions import SEQUENCES
 from resources.datasets import DatasetsResource
 from resources.io_managers import partition_path, stored_content_version
-from humancal.tables import to_arrow
 
 STORED, MISSING = "synthetic__demo", "synthetic__tiny"
 

@@ -11,7 +11,7 @@ import pytest
 from evaluation.oracle import stand_in_lifted_poses
 from humancal.lifter import LiftedPoses, R_crop_from_cam, lifted_to_table, normalize_detections
 from humancal.synthetic import generate_scene, preset
-from humancal.tables import to_arrow
+from humancal.tables.schemas import to_arrow
 from pipelines.definitions import build_definitions
 from pipelines.partitions import SEQUENCES
 from resources.datasets import DatasetsResource

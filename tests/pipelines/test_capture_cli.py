@@ -76,7 +76,7 @@ def test_add_writes_the_user_datasets_file_registers_the_partition_and_prints_a_
     assert entry["kind"] == "capture"
     assert entry["sequences"]["capture"] == {"format": "openpose", "views": views, "image_size": [640, 480],
                                              "skeleton": "body25", "fps": 30.0}
-    from humancal.sequences import load_datasets_config
+    from humancal.datasets.sequences import load_datasets_config
 
     specs = load_datasets_config()
     assert "lab__capture" in specs and "synthetic__demo" in specs  # merged with the packaged config
@@ -94,8 +94,8 @@ def test_add_writes_the_user_datasets_file_registers_the_partition_and_prints_a_
 
 
 def test_user_file_relative_paths_and_name_clash(tmp_path, state):
-    from humancal.sequences import DatasetsConfigError, load_datasets_config
-    from humancal.inputs import load_sequence_inputs
+    from humancal.datasets.inputs import load_sequence_inputs
+    from humancal.datasets.sequences import DatasetsConfigError, load_datasets_config
 
     _views(tmp_path / "op")
     state.mkdir()
@@ -232,8 +232,8 @@ def test_one_known_camera_among_unknown_ones_and_reference_cameras(tmp_path, sta
     entry = yaml.safe_load(_user_file(state).read_text())["datasets"]["lab"]["sequences"]["capture"]
     assert entry["cameras"] == {"path": str(one), "views": ["cam02"]}
     assert entry["reference_cameras"] == {"path": str(both)}
-    from humancal.inputs import load_sequence_inputs
-    from humancal.sequences import load_datasets_config
+    from humancal.datasets.inputs import load_sequence_inputs
+    from humancal.datasets.sequences import load_datasets_config
 
     inputs = load_sequence_inputs(load_datasets_config()["lab__capture"], body_model=lambda: None, data_root=None)
     assert inputs.known_cameras["view"].tolist() == [1] and len(inputs.gt_cameras) == 2
@@ -429,8 +429,8 @@ def _write_synthetic_capture(root: Path, body_model, num_frames: int = 80, foota
     ``footage_every``, also footage as image folders (``root/footage/<view>``, every n-th frame: the rest missing)."""
     from humancal.camera import cameras_from_table
     from humancal.formats import write_cameras, write_openpose
-    from humancal.formats.joint_mapping import from_canonical
     from humancal.formats.detections import detections_to_arrays
+    from humancal.formats.joint_mapping import from_canonical
     from humancal.synthetic import generate_scene, preset
 
     scene = generate_scene(preset("demo", num_frames=num_frames, seed=0), body_model, sequence="take1")
@@ -481,8 +481,8 @@ def _write_footage_images(scene, cameras, body_model, root: Path, folders: dict,
 
 
 def test_openpose_capture_reads_back_the_synthetic_detections(tmp_path, state, body_model):
-    from humancal.inputs import load_sequence_inputs
-    from humancal.sequences import load_datasets_config
+    from humancal.datasets.inputs import load_sequence_inputs
+    from humancal.datasets.sequences import load_datasets_config
     from humancal.synthetic import generate_scene, preset
 
     scene = generate_scene(preset("tiny", seed=1), body_model, sequence="capture")
@@ -602,8 +602,8 @@ def test_unsynced_offsets_that_one_pair_of_views_alone_gives_are_refused_with_th
 
 
 def test_given_time_offsets_and_per_view_fps_are_stored_and_applied(tmp_path, state, capsys, body_model):
-    from humancal.inputs import load_sequence_inputs, sequence_fps
-    from humancal.sequences import load_datasets_config
+    from humancal.datasets.inputs import load_sequence_inputs, sequence_fps
+    from humancal.datasets.sequences import load_datasets_config
 
     views, truth = _write_unsynced_capture(tmp_path, body_model)
     names = [Path(v).name for v in views]

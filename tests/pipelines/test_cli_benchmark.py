@@ -8,7 +8,7 @@ import pyarrow.parquet as pq
 
 from evaluation.benchmark import benchmark_table
 from evaluation.paper_results import paper_results
-from humancal.tables import to_arrow
+from humancal.tables.schemas import to_arrow
 from pipelines.cli import build_parser, main
 
 

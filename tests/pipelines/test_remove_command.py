@@ -7,7 +7,7 @@ import dagster as dg
 import pytest
 import yaml
 
-from humancal.sequences import add_user_sequence, remove_user_sequences
+from humancal.datasets.sequences import add_user_sequence, remove_user_sequences
 from pipelines.cli import main
 from pipelines.partitions import SEQUENCES
 

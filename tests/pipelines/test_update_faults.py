@@ -147,7 +147,7 @@ def cli_on(instance, tmp_path, monkeypatch):
     """``humancal`` on the toy graph whose partition toy__bad fails, a user's capture (dataset ``toy``)."""
     import pipelines.cli as cli
     import pipelines.definitions
-    from humancal.sequences import add_user_sequence
+    from humancal.datasets.sequences import add_user_sequence
 
     monkeypatch.setenv("HUMANCAL_STATE_DIR", str(tmp_path / "state"))
     add_user_sequence("toy", "bad", "capture", {"format": "openpose", "views": ["a/"]})

@@ -35,7 +35,7 @@ from humancal.formats.detections.table import (
 )
 from humancal.formats.errors import FormatError
 from humancal.formats.skeletons import Skeleton, get_skeleton
-from humancal.tables import empty_table
+from humancal.tables.schemas import empty_table
 
 __all__ = [
     "DETECTION_FORMATS",

@@ -25,9 +25,9 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from humancal.detections import detections_to_dense
 from humancal.formats.skeletons import SKELETONS, get_skeleton
 from humancal.keypoints import JOINT_INDEX
+from humancal.tables.detections import detections_to_dense
 
 __all__ = ["FIT_SPREAD", "MIN_PAIRS", "NEIGHBOUR_PAIRS", "SkeletonMismatch", "check_skeleton_fit",
            "neighbour_spread", "reinterpret"]

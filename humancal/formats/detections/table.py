@@ -1,6 +1,6 @@
 """The canonical ``detections`` table from per-image keypoint arrays, and back.
 
-The table (``humancal.tables.SCHEMAS["detections"]``) has one row per *present* canonical joint of a detection:
+The table (``humancal.tables.schemas.SCHEMAS["detections"]``) has one row per *present* canonical joint of a detection:
 sequence, frame, view, det_id, joint, x_px, y_px, score. Readers build it with :func:`detections_from_arrays`;
 writers go the other way with :func:`detections_to_arrays`.
 """
@@ -13,10 +13,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from humancal.detections import detections_to_dense
 from humancal.formats.errors import FormatError
 from humancal.keypoints import CANONICAL_JOINTS, JOINT_INDEX, NUM_JOINTS
-from humancal.tables import empty_table, validate_table
+from humancal.tables.detections import detections_to_dense
+from humancal.tables.schemas import empty_table, validate_table
 
 __all__ = [
     "IMAGE_SIZE_ATTR",

@@ -16,9 +16,9 @@ from humancal.association import (
     pair_affinities,
 )
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.geometry.alignment import align_points, rigid_residual_rms_m
 from humancal.geometry.rotations import axis_angle_to_rotmat
+from humancal.tables.detections import DenseDetections
 
 
 def roc_auc(positive: np.ndarray, score: np.ndarray) -> float:
@@ -32,10 +32,10 @@ def roc_auc(positive: np.ndarray, score: np.ndarray) -> float:
 @pytest.fixture(scope="module")
 def scene_inputs(body_model):
     """(detections, lifted, rig, person_id, keypoints_world_m): 3 people, 4 views, 60 frames, shipped lifter."""
-    from humancal.associations import Associations
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.associations import Associations
+    from humancal.tables.detections import detections_to_dense
 
     scene = generate_scene(preset("demo", num_people=3, num_views=4, num_frames=60, seed=11), body_model,
                            sequence="affinity")

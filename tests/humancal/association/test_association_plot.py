@@ -7,9 +7,9 @@ import pytest
 from humancal.association import AffinityConfig, TrackingConfig, associate
 from humancal.association.plot import association_frame, plot_association
 from humancal.camera import CameraRig
-from humancal.detections import detections_to_dense
 from humancal.plotting import pyplot
 from humancal.synthetic import generate_scene, preset
+from humancal.tables.detections import detections_to_dense
 
 
 @pytest.fixture(scope="module")

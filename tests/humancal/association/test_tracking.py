@@ -7,14 +7,19 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from humancal.association import SKELETONS3D_SCHEMA, TrackingConfig, associate, to_associations_table
-from humancal.association import to_skeletons_table
+from humancal.association import (
+    SKELETONS3D_SCHEMA,
+    TrackingConfig,
+    associate,
+    to_associations_table,
+    to_skeletons_table,
+)
 from humancal.association.cluster_triangulation import triangulate_clusters
 from humancal.association.track_smoothing import SmoothingConfig
 from humancal.camera import CameraRig
-from humancal.detections import DenseDetections
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import NUM_JOINTS
+from humancal.tables.detections import DenseDetections
 from tests.cameras import ring_of_cameras
 
 # --- metric helpers (identity metrics of the evaluation package come later; these stay here) --------------------
@@ -58,10 +63,10 @@ def f1(precision: float, recall: float) -> float:
 
 
 def _inputs(config, body_model, sequence):
-    from humancal.associations import Associations
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene
+    from humancal.tables.associations import Associations
+    from humancal.tables.detections import detections_to_dense
 
     scene = generate_scene(config, body_model, sequence=sequence)
     dense = detections_to_dense(scene.detections)
@@ -251,7 +256,7 @@ def test_tables(scene3, result3):
     table = to_associations_table(result3, "tracking")
     assert list(table.columns) == ["sequence", "frame", "view", "det_id", "person_id"]
     assert len(table) == len(dense) and (table["sequence"] == "tracking").all()
-    from humancal.associations import Associations
+    from humancal.tables.associations import Associations
 
     np.testing.assert_array_equal(Associations.from_table(table).person_of_detections(dense), result3.person_id)
     skeletons = to_skeletons_table(result3, "tracking")
@@ -395,8 +400,8 @@ def test_a_person_split_into_two_clusters_is_merged():
     """Unit rule of the merge: two clusters of one frame without a common view are merged when their skeletons lie
     together, a mirrored one included (detections with left and right swapped in two views), and the larger one
     reprojects onto the smaller one's detections; a cluster of another person 0.6 m away is not merged."""
-    from humancal.association.cycle_matching import FrameMatching
     from humancal.association.cluster_repair import merge_split_clusters
+    from humancal.association.cycle_matching import FrameMatching
     from humancal.keypoints import FLIP_INDEX
 
     rng = np.random.default_rng(1)
@@ -435,8 +440,8 @@ def test_a_person_split_into_two_clusters_is_merged():
 def test_a_lone_detection_joins_the_cluster_it_fits():
     """Unit rule of the completion: a detection no cluster took joins the one cluster of its frame that lacks its
     view and reprojects onto it (left and right swapped or not); another person's stays alone."""
-    from humancal.association.cycle_matching import FrameMatching
     from humancal.association.cluster_repair import complete_clusters
+    from humancal.association.cycle_matching import FrameMatching
     from humancal.keypoints import FLIP_INDEX
 
     rng = np.random.default_rng(2)

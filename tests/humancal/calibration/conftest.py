@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from humancal.camera import Camera
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 
 @pytest.fixture(scope="session")

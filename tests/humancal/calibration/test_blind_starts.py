@@ -15,9 +15,9 @@ def test_a_short_capture_where_every_view_is_blind(body_model, caplog):
     usable linear one. Started from the other views' field of view, with the lifted poses turned into camera
     frames at the starting focal lengths only, the bundle adjustment ended at 31 % (view 0: 2333 px for 1072);
     the best of several starts alone gave 5.6 %; turning the poses again at the refined focal lengths, 1.9 %."""
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.detections import detections_to_dense
 
     scene = generate_scene(preset("tiny"), body_model, sequence="tiny")
     d = detections_to_dense(scene.detections)

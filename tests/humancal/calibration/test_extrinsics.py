@@ -12,7 +12,7 @@ from humancal.calibration import (
     estimate_extrinsics,
     estimate_intrinsics,
 )
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 
 def _calibrate(dets, lifted, cameras, intrinsics_config=None, config=None):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from humancal.calibration import CalibrationError, IntrinsicsConfig, LiftedPoses, estimate_intrinsics
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 
 def _sizes(scene):

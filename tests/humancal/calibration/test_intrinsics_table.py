@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from humancal.calibration import IntrinsicsConfig, estimate_intrinsics, intrinsics_from_table, intrinsics_to_table
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 
 def test_intrinsics_round_trip_through_the_table(ring_scene, ring_stand_in):

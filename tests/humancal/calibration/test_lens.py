@@ -6,9 +6,9 @@ import pytest
 
 from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
 from humancal.calibration.lens import frame_folds
-from humancal.detections import detections_to_dense
 from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
 from humancal.synthetic import generate_scene, preset
+from humancal.tables.detections import detections_to_dense
 
 
 def _calibrate(scene, config=None):

@@ -7,7 +7,7 @@ import pytest
 
 from evaluation.camera_metrics import camera_errors
 from humancal.calibration import CalibrationError, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
-from humancal.detections import DenseDetections
+from humancal.tables.detections import DenseDetections
 
 DEFER = IntrinsicsConfig(missing_upright="defer")
 
@@ -77,9 +77,9 @@ def test_view_names_must_match_the_views(ring_scene, ring_stand_in):
 @pytest.mark.slow
 def test_31_views_short_capture_with_the_shipped_lifter(body_model):
     """31 cameras on a ring, 3 people, 20 frames, the shipped lifter: solved, with its time (printed)."""
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.detections import detections_to_dense
 
     scene = generate_scene(preset("demo", num_people=3, num_views=31, num_frames=20, seed=6), body_model,
                            sequence="ring31")

@@ -49,9 +49,9 @@ def test_a_short_capture_whose_first_matching_left_one_person_out(body_model):
     group."""
     from evaluation.camera_metrics import camera_errors
     from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.detections import detections_to_dense
 
     scene = generate_scene(preset("tiny", seed=2), body_model, sequence="tiny")
     d = detections_to_dense(scene.detections)
@@ -85,7 +85,7 @@ def test_bad_regroup_settings_are_refused(field, value):
 
 def test_nobody_seen_twice_gives_no_group(ring_scene, ring_stand_in):
     """One frame, each person in one view only: nothing to match, an empty result rather than an error."""
-    from humancal.detections import DenseDetections
+    from humancal.tables.detections import DenseDetections
 
     d, lifted, pid = ring_stand_in.detections, ring_stand_in.lifted, ring_stand_in.person_id
     frame = d.frame == d.frame.min()

@@ -26,8 +26,8 @@ def shelf_root():
 def test_shelf_initialisation_beats_the_paper(shelf_root):
     from evaluation.camera_metrics import camera_errors, reprojection_errors_per_view
     from evaluation.detection_quality import evaluate_grouping
-    from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
     from evaluation.oracle import canonical_from_shelf15, stand_in_from_matches
+    from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
     from humancal.datasets.shelf import SHELF15_JOINTS, load_shelf
 
     shelf = load_shelf(shelf_root)
@@ -70,8 +70,8 @@ def test_shelf_initialisation_with_the_learned_lifter(shelf_root):
     from evaluation.detection_quality import evaluate_grouping
     from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
     from humancal.datasets.shelf import load_shelf
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter
+    from humancal.tables.detections import detections_to_dense
 
     lifter = load_lifter(_lifter_checkpoint())
     shelf = load_shelf(shelf_root)

@@ -5,14 +5,14 @@ import pytest
 
 from evaluation.camera_metrics import camera_errors
 from humancal.calibration import ExtrinsicsConfig, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
-from humancal.validation import check_views_agree
+from humancal.tables.plausibility import check_views_agree
 
 
 @pytest.fixture(scope="module")
 def seated(body_model):
-    from humancal.detections import detections_to_dense
     from humancal.lifter import lift_detections, load_lifter, shipped_checkpoint
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.detections import detections_to_dense
 
     scene = generate_scene(preset("demo", seed=1007, behaviour="seated", num_frames=20, num_views=5, num_people=3),
                            body_model, sequence="seated")

@@ -18,7 +18,7 @@ from humancal.datasets.shelf import (
 from humancal.formats import FormatError
 from humancal.grouping import BODY25_LIMBS, GroupingConfig
 from humancal.settings import DataRootError, dataset_dir
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 WIDTH_PX, HEIGHT_PX = 1032, 776
 

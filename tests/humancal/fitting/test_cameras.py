@@ -7,7 +7,7 @@ import torch
 
 from evaluation.camera_metrics import camera_errors
 from humancal.camera import Camera, CameraRig
-from humancal.fitting import BodyFitConfig, CameraVariables, bundle_adjust, fit_bodies
+from humancal.fitting import BodyFitConfig, CameraVariables, bundle_adjust_on_joints, fit_bodies
 from humancal.prior import shipped_prior
 from tests.humancal.fitting.test_fit import FAST, scene_inputs  # noqa: F401  (the fixture)
 
@@ -86,17 +86,17 @@ def test_joint_refinement_brings_perturbed_cameras_back(body_model, scene_inputs
 def test_bundle_adjustment_on_triangulated_joints(scene_inputs):  # noqa: F811
     _, observations, rig = scene_inputs
     start = _perturbed(rig)
-    untouched = bundle_adjust(observations, start, BodyFitConfig(), iterations=0)
-    result = bundle_adjust(observations, start, BodyFitConfig(), iterations=100)
-    lbfgs = bundle_adjust(observations, start, BodyFitConfig(bundle_solver="lbfgs"), iterations=100)
+    untouched = bundle_adjust_on_joints(observations, start, BodyFitConfig(), iterations=0)
+    result = bundle_adjust_on_joints(observations, start, BodyFitConfig(), iterations=100)
+    lbfgs = bundle_adjust_on_joints(observations, start, BodyFitConfig(bundle_solver="lbfgs"), iterations=100)
     assert result.reprojection_error_px < 0.8 * untouched.reprojection_error_px
     assert result.reprojection_error_px < lbfgs.reprojection_error_px < untouched.reprojection_error_px
     assert np.isfinite(result.points_world_m[observations.joints_valid]).all()
     # converged: the same minimum as from the true cameras (where that minimum lies is the data's business), with
     # the tie to each start made negligible so that both solve the same problem
     untied = BodyFitConfig(weight_camera_prior=1e-8)
-    apart = _mean_errors(bundle_adjust(observations, start, untied, iterations=100).cameras,
-                         bundle_adjust(observations, rig, untied, iterations=100).cameras)
+    apart = _mean_errors(bundle_adjust_on_joints(observations, start, untied, iterations=100).cameras,
+                         bundle_adjust_on_joints(observations, rig, untied, iterations=100).cameras)
     assert apart["angle_error_deg"] < 0.02 and apart["focal_error_pct"] < 0.05, apart
     assert apart["position_error_mm"] < 2.0, apart
 
@@ -110,16 +110,16 @@ def test_a_bundle_adjustment_that_fails_keeps_the_initial_cameras_and_says_so(bo
     v, p, t, j = np.argwhere((observations.confidence > 0) & observations.joints_valid[None])[0]
     keypoints[v, p, t, j] = np.nan  # a non-finite objective from the first evaluation
     broken = replace(observations, keypoints_px=keypoints)
-    result = bundle_adjust(broken, start, BodyFitConfig(), iterations=5)
+    result = bundle_adjust_on_joints(broken, start, BodyFitConfig(), iterations=5)
     assert result.failure is not None and "the objective became nan" in result.failure
     np.testing.assert_allclose(result.cameras.K, start.K)
     np.testing.assert_allclose(result.cameras.t_cam_from_world_m, start.t_cam_from_world_m, atol=1e-12)
 
 
 def test_the_levenberg_marquardt_bundle_reaches_the_exact_cameras_where_lbfgs_stops_short(body_model):
-    from humancal.detections import detections_to_dense
     from humancal.fitting import body_observations
     from humancal.synthetic import generate_scene, preset
+    from humancal.tables.detections import detections_to_dense
 
     scene = generate_scene(preset("tiny_clean"), body_model, sequence="clean")  # exact projections
     rng = np.random.default_rng(0)
@@ -130,8 +130,8 @@ def test_the_levenberg_marquardt_bundle_reaches_the_exact_cameras_where_lbfgs_st
     rig = CameraRig.from_cameras(scene.rig)
     start = _perturbed(rig)
     config = BodyFitConfig(weight_camera_prior=1e-8)  # no pull back to the perturbed start
-    lm = bundle_adjust(observations, start, config.replace(bundle_solver="lm"), iterations=50)
-    lbfgs = bundle_adjust(observations, start, config.replace(bundle_solver="lbfgs"), iterations=50)
+    lm = bundle_adjust_on_joints(observations, start, config.replace(bundle_solver="lm"), iterations=50)
+    lbfgs = bundle_adjust_on_joints(observations, start, config.replace(bundle_solver="lbfgs"), iterations=50)
     errors = _mean_errors(lm.cameras, rig)
     assert lm.failure is None and lm.reprojection_error_px < 0.05, lm.reprojection_error_px
     assert errors["angle_error_deg"] < 0.01 and errors["focal_error_pct"] < 0.05, errors
@@ -139,7 +139,7 @@ def test_the_levenberg_marquardt_bundle_reaches_the_exact_cameras_where_lbfgs_st
     assert lbfgs.reprojection_error_px > 10 * lm.reprojection_error_px, (lbfgs.reprojection_error_px,
                                                                           lm.reprojection_error_px)
     # a long capture is adjusted on every k-th frame (here 20 frames, at most 5 -> every 4th): the others are NaN
-    sparse = bundle_adjust(observations, start, config.replace(bundle_max_frames=5), iterations=50)
+    sparse = bundle_adjust_on_joints(observations, start, config.replace(bundle_max_frames=5), iterations=50)
     assert np.isnan(sparse.points_world_m[:, 1:4]).all() and np.isnan(sparse.points_world_m[:, 5:8]).all()
     assert np.isfinite(sparse.points_world_m[:, ::4][observations.joints_valid[:, ::4]]).all()
     assert _mean_errors(sparse.cameras, rig)["angle_error_deg"] < 0.01
@@ -148,4 +148,4 @@ def test_the_levenberg_marquardt_bundle_reaches_the_exact_cameras_where_lbfgs_st
     with pytest.raises(ValueError, match="BodyFitConfig.bundle_solver='newton' must be one of"):
         BodyFitConfig(bundle_solver="newton")
     with pytest.raises(ValueError, match="the cameras must move"):
-        bundle_adjust(observations, start, config, regime="fixed")
+        bundle_adjust_on_joints(observations, start, config, regime="fixed")

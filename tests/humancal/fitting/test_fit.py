@@ -5,10 +5,10 @@ import pytest
 import torch
 
 from humancal.camera import CameraRig
-from humancal.detections import detections_to_dense
 from humancal.fitting import BodyFitConfig, FittingInputError, body_observations, fit_bodies
 from humancal.prior import shipped_prior
 from humancal.synthetic import generate_scene, preset
+from humancal.tables.detections import detections_to_dense
 
 FAST = BodyFitConfig(iterations_3d=150, iterations_global=5, iterations_body=15, cameras="fixed")
 

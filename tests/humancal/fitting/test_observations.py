@@ -2,10 +2,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from humancal.detections import DenseDetections
 from humancal.fitting import FittingInputError, body_observations
 from humancal.keypoints import CANONICAL_JOINTS
-from humancal.tables import SCHEMAS
+from humancal.tables.detections import DenseDetections
+from humancal.tables.schemas import SCHEMAS
 
 
 def _detections(rows):

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 from humancal.camera import Camera
 from humancal.formats.detections import sort_detections
 from humancal.keypoints import CANONICAL_JOINTS
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 
 def make_cameras(seed: int = 0, count: int = 3, distortion: bool = True) -> list[Camera]:

@@ -17,7 +17,7 @@ from humancal.grouping import (
 )
 from humancal.grouping.merge import BODY25_BONE_LENGTHS_M, tree_distances_m
 from humancal.keypoints import CANONICAL_JOINTS
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 # A standing person facing the camera, metres, x right, y down, neck at the origin (BODY_25 order).
 _TEMPLATE_M = np.array(

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humancal.detections import detections_to_dense
 from humancal.keypoints import NUM_JOINTS
 from humancal.lifter import (
     HELD_OUT_CMU_SUBJECTS,
@@ -16,7 +15,8 @@ from humancal.lifter import (
     load_lifter,
     split_held_out,
 )
-from humancal.tables import validate_table
+from humancal.tables.detections import detections_to_dense
+from humancal.tables.schemas import validate_table
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from humancal.mocap import MocapFormatError, R_ZUP_FROM_YUP, asf_rest_positions, read_amc, read_asf
+from humancal.mocap import R_ZUP_FROM_YUP, MocapFormatError, asf_rest_positions, read_amc, read_asf
 
 # root -> thigh (rest direction +x, length 10, local frame turned 90 deg about z, dof rx)
 #      -> shin  (rest direction -y, length 5, local frame = world, dof rx rz)
@@ -199,7 +199,7 @@ def test_asf_errors(tmp_path):
 
 def test_amc_fast_and_careful_readers_agree(tmp_path, skeleton):
     from humancal.mocap.asf_amc import _amc_columns, _amc_header, _amc_values_careful, _amc_values_fast
-    from humancal.mocap.kinematics import read_text_lines
+    from humancal.mocap.reading import read_text_lines
 
     rng = np.random.default_rng(1)
     frames = [(" ".join(f"{v:.5f}" for v in rng.normal(size=6)), f"{rng.normal():.5f}",

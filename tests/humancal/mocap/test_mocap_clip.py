@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humancal.mocap import MocapClip, MocapFormatError, R_ZUP_FROM_YUP, euler_rotmat
-from humancal.mocap.kinematics import clip_name_and_subject, floor_height_m, read_text_lines
+from humancal.mocap import R_ZUP_FROM_YUP, MocapClip, MocapFormatError, euler_rotmat
+from humancal.mocap.reading import clip_name_and_subject, floor_height_m, read_text_lines
 
 
 def make_clip(positions: np.ndarray, fps: float = 120.0) -> MocapClip:

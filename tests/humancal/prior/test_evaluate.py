@@ -21,7 +21,7 @@ from humancal.prior.evaluate import (
     reconstruction_report,
     virtual_cameras,
 )
-from humancal.prior.fitting import FitConfig
+from humancal.prior.latent_fit import FitConfig
 from humancal.retarget import RetargetedClip
 
 

@@ -9,7 +9,7 @@ import torch
 
 from humancal.prior import MotionVAE, PriorConfig
 from humancal.prior.evaluate import virtual_cameras
-from humancal.prior.fitting import FitConfig, KeypointObservations, fit_motion, initial_root
+from humancal.prior.latent_fit import FitConfig, KeypointObservations, fit_motion, initial_root
 
 
 def _smooth_motion(body, people: int, frames: int, seed: int = 0):

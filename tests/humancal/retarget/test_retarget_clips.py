@@ -22,7 +22,7 @@ from humancal.retarget import (
     retarget_clip,
     retarget_clips,
 )
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 
 def _segment_lengths_m(body_model, phenotypes):

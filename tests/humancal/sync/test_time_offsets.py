@@ -141,7 +141,7 @@ def test_bad_offsets_are_refused():
 
 
 def test_tracks_follow_each_person_in_a_view(walking_scene):
-    from humancal.detections import detections_to_dense
+    from humancal.tables.detections import detections_to_dense
 
     dense = detections_to_dense(walking_scene.detections)
     track = link_view_tracks(dense, 0)

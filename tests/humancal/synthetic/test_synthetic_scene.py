@@ -11,7 +11,7 @@ import pytest
 from humancal.camera import Camera, cameras_from_table, project_points
 from humancal.keypoints import CANONICAL_JOINTS, FLIP_INDEX, JOINT_INDEX, NUM_JOINTS
 from humancal.synthetic import DetectorNoise, SceneConfig, generate_scene, preset, simulate_detections
-from humancal.tables import SCHEMAS
+from humancal.tables.schemas import SCHEMAS
 
 TABLES = ("detections", "cameras", "poses3d", "associations", "people", "motions")
 

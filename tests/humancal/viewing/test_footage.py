@@ -24,8 +24,8 @@ from humancal.viewing.footage import (
     open_footage,
     write_footage,
 )
-from humancal.viewing.overlays import overlay_alignment, write_overlays
 from humancal.viewing.mesh import fitted_meshes
+from humancal.viewing.overlays import overlay_alignment, write_overlays
 from humancal.viewing.reprojection import fitted_keypoints
 
 _TORSO = [JOINT_INDEX[name] for name in ("left_hip", "right_hip", "left_shoulder", "right_shoulder")]
@@ -145,8 +145,8 @@ def test_footage_that_cannot_be_read_is_named(tmp_path):
 def test_a_captures_footage_is_read_on_the_captures_clock(tmp_path):
     """``humancal add --videos`` with per-view frame rates and time offsets: each view's footage is read at its own
     frame for the capture's frame n (n / fps_0 + offset_0 = m / fps_v + offset_v); dropped views have none."""
-    from humancal.inputs import capture_footage
-    from humancal.sequences import SequenceSpec
+    from humancal.datasets.inputs import capture_footage
+    from humancal.datasets.sequences import SequenceSpec
 
     folders = []
     for name in ("cam1", "cam2", "cam3"):

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.long_tables import name_codes, unique_rows
+from humancal.tables.pivot import name_codes, unique_rows
 
 __all__ = ["DensePoses", "poses_to_dense"]
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from humancal.tables import validate_table
+from humancal.tables.schemas import validate_table
 
 __all__ = ["Associations"]
 
@@ -120,7 +120,7 @@ class Associations:
         """The person of each given detection, ``-1`` for detections not listed (vectorized).
 
         Args:
-            frame, view, det_id: (D,) keys (e.g. the fields of :class:`~humancal.detections.DenseDetections`).
+            frame, view, det_id: (D,) keys (e.g. the fields of :class:`~humancal.tables.detections.DenseDetections`).
 
         Returns:
             (D,) int64 person ids.

@@ -37,7 +37,7 @@ from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.observations import BodyObservations, FittingInputError
 from humancal.least_squares import ArrowSystem, Damping, Stop, levenberg_marquardt, solve_damped
 
-__all__ = ["BundleResult", "bundle_adjust"]
+__all__ = ["BundleResult", "bundle_adjust_on_joints"]
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ class BundleResult:
     failure: str | None = None
 
 
-def bundle_adjust(observations: BodyObservations, rig: CameraRig, config: BodyFitConfig = BodyFitConfig(), *,
+def bundle_adjust_on_joints(observations: BodyObservations, rig: CameraRig, config: BodyFitConfig = BodyFitConfig(), *,
                   regime: str = "int_ext", iterations: int = 100, dtype: torch.dtype = torch.float64
                   ) -> BundleResult:
     """Refine the cameras (``regime``: ``ext`` or ``int_ext``) and the triangulated joints on the detections.

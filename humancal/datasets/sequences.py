@@ -34,6 +34,8 @@ from typing import Any
 
 import yaml
 
+from humancal.settings import REPO_ROOT
+
 __all__ = [
     "SequenceSpec",
     "DatasetsConfigError",
@@ -92,7 +94,7 @@ def default_config_path() -> Path:
     configured = os.environ.get(DATASETS_ENV)
     if configured:
         return Path(configured)
-    return Path(__file__).resolve().parent.parent / "pipelines" / "datasets.yaml"
+    return REPO_ROOT / "pipelines" / "datasets.yaml"
 
 
 def user_config_path() -> Path:

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
-from humancal.long_tables import has_repeats, name_codes, unique_rows
+from humancal.tables.pivot import has_repeats, name_codes, unique_rows
 
 __all__ = ["DenseDetections", "detections_to_dense"]
 

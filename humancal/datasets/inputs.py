@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from humancal.sequences import SequenceSpec
+from humancal.datasets.sequences import SequenceSpec
 from humancal.settings import DATA_DIR_ENV, DataRootError
-from humancal.tables import empty_table, validate_table
+from humancal.tables.schemas import empty_table, validate_table
 
 __all__ = ["DEFAULT_FPS", "SequenceInputs", "body_fit_regime", "capture_footage", "load_sequence_inputs", "sequence_fps",
            "sequence_principal_points"]
