@@ -6,8 +6,9 @@ lifter in crop frames and calibrated (``estimate_intrinsics`` with ``missing_upr
 ``estimate_extrinsics``) once per ``--variant``; prints each view's focal error against the truth and its status.
 
 Part 2 (``--valley``): on the first seed's scene, a bundle adjustment of the reprojection alone (the body fit's,
-``humancal.fitting.joint_bundle.bundle_adjust_on_joints``: free points, a negligible camera tie), started at the true cameras and
-at the calibration's, by L-BFGS for 100 / 1,000 / 3,000 iterations and by Levenberg-Marquardt to convergence; then one view's focal scaled by 0.85-1.15
+``humancal.fitting.joint_bundle.bundle_adjust_on_joints``: free points, a negligible camera tie), started at the true
+cameras and at the calibration's, by L-BFGS for 100 / 1,000 / 3,000 iterations and by Levenberg-Marquardt to
+convergence; then one view's focal scaled by 0.85-1.15
 with the other cameras true and the extrinsics and points refitted. The truth is used here to ask what the data
 can determine (evaluation only; no method reads it).
 

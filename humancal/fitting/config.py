@@ -60,8 +60,8 @@ class BodyFitConfig(Config):
             ``int_ext`` (focal length and extrinsics: fully self-calibrated).
         refine_k1: whether each view's first radial distortion coefficient moves too (with ``ext``/``int_ext``).
         bundle_start: whether moving cameras (``ext``, ``int_ext``) first take a bundle adjustment on the
-            triangulated joints as free points (:func:`humancal.fitting.joint_bundle.bundle_adjust_on_joints`, regime ``cameras``)
-            before the joint refinement starts from them. Free points take up a detector's own definition of the
+            triangulated joints as free points (:func:`humancal.fitting.joint_bundle.bundle_adjust_on_joints`,
+            regime ``cameras``) before the joint refinement starts from them. Free points take up a detector's own definition of the
             joints, which the bodies cannot (``docs/refinement.md``, "A detector with its own joints").
         bundle_solver: how that bundle adjustment is solved (``humancal.fitting.joint_bundle``): ``lm``
             (Levenberg-Marquardt with the points eliminated, run to convergence) or ``lbfgs`` (100 L-BFGS

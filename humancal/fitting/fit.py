@@ -15,8 +15,8 @@ interpenetration of different people (``humancal.fitting.contact``); and, when t
 each camera to its initial value.
 
 Schedule: when the cameras move, they first take a bundle adjustment on the triangulated joints as free points
-(``BodyFitConfig.bundle_start``, :func:`humancal.fitting.joint_bundle.bundle_adjust_on_joints`: the ``separate`` baseline's
-cameras), and the joint refinement starts from there (chosen on synthetic scenes whose detector has its own
+(``BodyFitConfig.bundle_start``, :func:`humancal.fitting.joint_bundle.bundle_adjust_on_joints`: the ``separate``
+baseline's cameras), and the joint refinement starts from there (chosen on synthetic scenes whose detector has its own
 definition of the joints, where a body cannot explain what free points can; ``docs/refinement.md``). The root of
 each frame starts from a rigid alignment of the average body onto the triangulated
 joints (``skeletons3d``); then three stages run on all people and all windows at once:

@@ -18,7 +18,8 @@ __all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "synchronise_views"]
 log = logging.getLogger(__name__)
 
 DEFAULT_SYNC_FPS = 30.0
-"""The frame rate assumed for a view whose rate the capture does not state (``humancal.datasets.inputs.DEFAULT_FPS``)."""
+"""The frame rate assumed for a view whose rate the capture does not state
+(``humancal.datasets.inputs.DEFAULT_FPS``)."""
 
 
 @dataclass(frozen=True)
