@@ -58,29 +58,22 @@ class TableError(ValueError):
     """A table does not match its declared schema; the message names table, column and expectation."""
 
 
+_DETECTION_FIELDS = [
+    ("sequence", pa.string()),
+    ("frame", pa.int32()),
+    ("view", pa.int32()),
+    ("det_id", pa.int32()),
+    ("joint", pa.string()),
+    ("x_px", pa.float64()),
+    ("y_px", pa.float64()),
+    ("score", pa.float64()),
+]
+"""The columns of a detected keypoint, which ``lifted_detections`` extends."""
+
 SCHEMAS: dict[str, pa.Schema] = {
-    "detections": pa.schema(
-        [
-            ("sequence", pa.string()),
-            ("frame", pa.int32()),
-            ("view", pa.int32()),
-            ("det_id", pa.int32()),
-            ("joint", pa.string()),
-            ("x_px", pa.float64()),
-            ("y_px", pa.float64()),
-            ("score", pa.float64()),
-        ]
-    ),
+    "detections": pa.schema(_DETECTION_FIELDS),
     "lifted_detections": pa.schema(
-        [
-            ("sequence", pa.string()),
-            ("frame", pa.int32()),
-            ("view", pa.int32()),
-            ("det_id", pa.int32()),
-            ("joint", pa.string()),
-            ("x_px", pa.float64()),
-            ("y_px", pa.float64()),
-            ("score", pa.float64()),
+        _DETECTION_FIELDS + [
             ("x_crop_m", pa.float64()),
             ("y_crop_m", pa.float64()),
             ("z_crop_m", pa.float64()),

@@ -36,13 +36,8 @@ def cmd_train(args) -> int:
     config = LifterConfig.default().replace(**overrides)
     defs = build_definitions(lifter_config=config)
     instance = _instance()
-    missing = _assets_missing_data(defs)
-    if dg.AssetKey("mocap_clips") in missing:
-        raise SystemExit(f"humancal: training the lifter needs {missing[dg.AssetKey('mocap_clips')]}/ under the data "
-                         "root (set HUMANCAL_DATA_DIR); the shipped lifter stays in force")
-    selection = [dg.AssetKey("lifter_trained")]
-    if instance.get_latest_materialization_event(dg.AssetKey("mocap_clips")) is None:
-        selection.insert(0, dg.AssetKey("mocap_clips"))
+    selection = _selection_with_mocap(defs, instance, ["lifter_trained"], "the lifter",
+                                      "; the shipped lifter stays in force")
     print(f"training the lifter ({config.epochs} epochs of {config.samples_per_epoch} samples, seed {config.seed}; "
           "about 15 minutes on 2 cores" + (", after retargeting the CMU mocap" if len(selection) == 2 else "") + ") ...",
           flush=True)
@@ -75,13 +70,7 @@ def _train_prior(args) -> int:
                for v in PRIOR_VARIANTS}
     defs = build_definitions(prior_configs=configs)
     instance = _instance()
-    missing = _assets_missing_data(defs)
-    if dg.AssetKey("mocap_clips") in missing:
-        raise SystemExit(f"humancal: training the motion prior needs {missing[dg.AssetKey('mocap_clips')]}/ under the "
-                         "data root (set HUMANCAL_DATA_DIR)")
-    selection = [dg.AssetKey("motion_prior_trained"), dg.AssetKey("prior_metrics")]
-    if instance.get_latest_materialization_event(dg.AssetKey("mocap_clips")) is None:
-        selection.insert(0, dg.AssetKey("mocap_clips"))
+    selection = _selection_with_mocap(defs, instance, ["motion_prior_trained", "prior_metrics"], "the motion prior")
     config = configs[variant]
     print(f"training the motion prior '{variant}' ({config.epochs} epochs of {config.steps_per_epoch} steps, seed "
           f"{config.seed}" + (", after retargeting the CMU mocap" if len(selection) == 3 else "") + "), then its "
@@ -98,3 +87,22 @@ def _train_prior(args) -> int:
         print("`humancal update` now refits every sequence's bodies with it (the body fit's prior is the "
               "motion_prior_checkpoint asset: this prior)")
     return 0
+
+
+def _selection_with_mocap(defs, instance, assets: list[str], what: str, consequence: str = "") -> list:
+    """The asset keys that train ``what``, with ``mocap_clips`` first when it was never materialized.
+
+    Raises:
+        SystemExit: the data root lacks the mocap (the message names the folder and ``HUMANCAL_DATA_DIR``).
+    """
+    import dagster as dg
+
+    mocap = dg.AssetKey("mocap_clips")
+    missing = _assets_missing_data(defs)
+    if mocap in missing:
+        raise SystemExit(f"humancal: training {what} needs {missing[mocap]}/ under the data root (set "
+                         f"HUMANCAL_DATA_DIR){consequence}")
+    selection = [dg.AssetKey(name) for name in assets]
+    if instance.get_latest_materialization_event(mocap) is None:
+        selection.insert(0, mocap)
+    return selection
