@@ -13,8 +13,8 @@ The library, in the order the method runs (each subpackage's docstring and ``doc
   and the bodies fitted to the detections with the cameras refined alongside.
 * :mod:`humancal.viewing`: the result as a 3D recording, overlays and pictures.
 
-Shared by the stages: :mod:`humancal.camera` (``Camera``, ``CameraRig``), :mod:`humancal.geometry` (rotations,
-alignment, projection, triangulation), :mod:`humancal.least_squares`, :mod:`humancal.tables` (the canonical tables
+Shared by the stages: :mod:`humancal.camera` (``Camera``, ``CameraRig``, the projection with lens distortion),
+:mod:`humancal.geometry` (rotations, alignment, triangulation), :mod:`humancal.least_squares`, :mod:`humancal.tables` (the canonical tables
 and their array views), :mod:`humancal.keypoints` (the 23 canonical keypoints), :mod:`humancal.config` (the base of
 every stage's settings), :mod:`humancal.settings` (data and state folders). Training data and test scenes:
 :mod:`humancal.mocap`, :mod:`humancal.retarget`, :mod:`humancal.synthetic`. Conventions (frames, units, rotations)

@@ -29,7 +29,7 @@ import pandas as pd
 from humancal.calibration.bundle import BundleResult, bundle_adjust
 from humancal.calibration.view_repair import check_and_repair_views
 from humancal.camera import intrinsic_matrices
-from humancal.geometry.projection import undistort_points_px
+from humancal.camera.projection import undistort_points_px
 from humancal.lifter.lifted import LiftedPoses
 from humancal.tables.detections import DenseDetections
 

@@ -5,7 +5,8 @@ Convention (``docs/conventions.md``): OpenCV pinhole, x right, y down, z forward
 in pixels; distortion as OpenCV's (k1, k2, p1, p2, k3). World: metres, right-handed, Z up.
 
 :mod:`.model` holds one camera (:class:`Camera`, :func:`project_points`, :func:`look_at`); :mod:`.rig` the
-cameras of all views (:class:`CameraRig`, a sequence of cameras, and the canonical ``cameras`` table).
+cameras of all views (:class:`CameraRig`, a sequence of cameras, and the canonical ``cameras`` table);
+:mod:`.projection` the projection through OpenCV's camera model with lens distortion, in numpy and torch.
 
 Example: a camera 5 m back along -y, looking along +y (world z up is its -y), sees the origin at its principal point
 and a point 1 m up 200 px higher in the image:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from humancal.geometry.projection import project_points_np
+from humancal.camera.projection import project_points_np
 
 __all__ = ["Camera", "intrinsic_matrices", "intrinsic_matrix", "look_at", "pinhole", "project_points"]
 

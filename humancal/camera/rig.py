@@ -15,7 +15,7 @@ import pandas as pd
 import torch
 
 from humancal.camera.model import Camera, intrinsic_matrices
-from humancal.geometry.projection import project_points_np, project_points_torch
+from humancal.camera.projection import project_points_np, project_points_torch
 from humancal.tables.schemas import validate_table
 
 __all__ = [
@@ -60,7 +60,7 @@ class RigTensors:
     distortion: torch.Tensor
 
     def project(self, points_world_m: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """:func:`~humancal.geometry.projection.project_points_torch` through every view.
+        """:func:`~humancal.camera.projection.project_points_torch` through every view.
 
         Args:
             points_world_m: (N, 3) points seen by all views, or (..., V, N, 3) per view, metres.
@@ -217,7 +217,7 @@ class CameraRig(Sequence[Camera]):
                           as_t(self.distortion))
 
     def project(self, points_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`~humancal.geometry.projection.project_points_np` through every view.
+        """:func:`~humancal.camera.projection.project_points_np` through every view.
 
         Args:
             points_world_m: (N, 3) points seen by all views, or (..., V, N, 3) per view, metres.

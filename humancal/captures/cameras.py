@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 
 from humancal.camera import CameraRig, cameras_by_view, cameras_to_table
+from humancal.camera.projection import undistort_points_px
 from humancal.formats import CAMERA_READ_FORMATS, FormatError, infer_camera_format, read_cameras
-from humancal.geometry.projection import undistort_points_px
 
 __all__ = ["read_capture_cameras", "undistort_known_views"]
 

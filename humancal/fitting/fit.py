@@ -8,7 +8,7 @@ Variables per camera (``BodyFitConfig.cameras``, ``humancal.fitting.cameras``): 
 (``ext``), or the focal length and the extrinsics (``int_ext``: fully self-calibrated).
 
 Objective (``BodyFitConfig`` documents the units): a confidence-weighted Geman-McClure reprojection term of the
-23 canonical keypoints in every view, through the shared camera model (``humancal.geometry.projection``); the
+23 canonical keypoints in every view, through the shared camera model (``humancal.camera.projection``); the
 latent prior ``mean(z^2)``; the local-linear term ``mean((z[t+1] - 2 z[t] + z[t-1])^2)``; a shape prior; a root
 smoothness term; for long sequences cut into windows (``humancal.prior.windows``), a seam term; the
 interpenetration of different people (``humancal.fitting.contact``); and, when the cameras move, a weak tie of

@@ -282,7 +282,7 @@ def corrupt_keypoints_2d(keypoints_m: Tensor, cameras: CameraRig, generator: tor
         noise_px: noise standard deviation per coordinate, pixels.
         missing: probability that a keypoint is missing in a view.
     """
-    from humancal.geometry.projection import project_points_torch
+    from humancal.camera.projection import project_points_torch
 
     to = dict(dtype=keypoints_m.dtype, device=keypoints_m.device)
     K, R, t = (torch.as_tensor(np.stack([getattr(c, n) for c in cameras]), **to)

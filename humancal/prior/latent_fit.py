@@ -31,8 +31,8 @@ from torch import Tensor
 
 from humancal.body import BodyModel, RestSkeleton
 from humancal.camera import CameraRig
+from humancal.camera.projection import project_points_torch
 from humancal.config import Config, at_least, in_range, positive
-from humancal.geometry.projection import project_points_torch
 from humancal.geometry.triangulation import triangulate_dlt
 from humancal.keypoints import JOINT_INDEX, NUM_JOINTS
 from humancal.prior.config import NUM_PRIOR_BONES

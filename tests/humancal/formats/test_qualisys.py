@@ -10,8 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from humancal.camera import Camera
+from humancal.camera.projection import project_points_np
 from humancal.formats import FormatError, infer_camera_format, read_cameras, read_cameras_with_names, write_cameras
-from humancal.geometry.projection import project_points_np
 
 FLIP = np.diag([1.0, -1.0, -1.0])  # OpenCV camera axes <-> Qualisys camera axes (y up, z backwards)
 

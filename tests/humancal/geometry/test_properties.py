@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from humancal.camera import Camera
+from humancal.camera.projection import project_points_np, undistort_points_px
 from humancal.geometry.alignment import fit_similarity
-from humancal.geometry.projection import project_points_np, undistort_points_px
 from humancal.geometry.rotations import (
     project_to_rotmat,
     rotation_angle_deg,

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from humancal.geometry.projection import project_points_np, project_points_torch
+from humancal.camera.projection import project_points_np, project_points_torch
 from humancal.geometry.rotations import rotvec_to_rotmat
 
 # realistic lens distortion (a wide-angle action camera, a mild webcam, a tangential-heavy lens)
