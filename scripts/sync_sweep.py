@@ -13,7 +13,7 @@ half a frame or more off but used (status ``ok``: silent errors), and the views 
 
 Resumable: one JSON line per scene in ``--out``; a rerun skips the scenes already there.
 
-    python scripts/sync_sweep.py --scenes 20 --seed 0 --out sync_sweep.jsonl
+    python scripts/sync_sweep.py --scenes 20 --seed 0 --out sync_sweep.jsonl [--lifter checkpoint.pt]
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ import pandas as pd
 
 
 def run_scene(seed: int, body, lifter) -> dict:
-    from humancal.synthetic import generate_scene, preset
     from humancal.sync import estimate_time_offsets
+    from humancal.synthetic import generate_scene, preset
     from humancal.synthetic.clocks import started_by_hand
 
     rng = np.random.default_rng(seed)
@@ -62,8 +62,12 @@ def main() -> None:
     parser.add_argument("--scenes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0, help="which set of scenes (scene i: seed * 100000 + i)")
     parser.add_argument("--out", type=Path, default=Path("sync_sweep.jsonl"))
+    parser.add_argument("--lifter", type=Path, default=None,
+                        help="a lifter checkpoint (train_lifter.py --out) instead of the shipped weights")
     args = parser.parse_args()
     seeds = [args.seed * 100_000 + i for i in range(args.scenes)]
+
+    import torch
 
     from humancal.body import BodyModel
     from humancal.lifter import load_lifter, shipped_checkpoint
@@ -78,7 +82,9 @@ def main() -> None:
         if seed in done:
             continue
         if body is None:
-            body, lifter = BodyModel(), load_lifter(shipped_checkpoint())
+            checkpoint = (torch.load(args.lifter, map_location="cpu", weights_only=True) if args.lifter
+                          else shipped_checkpoint())
+            body, lifter = BodyModel(), load_lifter(checkpoint)
         row = run_scene(seed, body, lifter)
         done[seed] = row
         with args.out.open("a") as f:

@@ -2,21 +2,22 @@
 
 Each camera draws an image size, a focal length (within the focal range and the field-of-view range), a camera
 height, an azimuth and a horizontal distance (within the distance range, narrowed so the person fills a
-plausible fraction of the image height). It is first aimed at the person's pelvis with a small random roll,
-then turned so that the pelvis lands on a random pixel: with probability ``truncation_prob`` anywhere in the
-image grown by ``centre_margin_frac`` on every side (the body may be partly outside), otherwise uniformly
-where the whole body fits (a box from 0.5 apparent heights above the pelvis to 0.55 below it, 0.3 to each
-side). The pitch varies with the camera height, the distance and that pixel.
+plausible fraction of the image height). A fraction ``steep_fraction`` of the cameras look down steeply instead:
+their pitch is drawn, the distance is taken along the line of sight, and the height follows from both. Each
+camera is first aimed at the person's pelvis with a small random roll, then turned so that the pelvis lands on a
+random pixel: with probability ``truncation_prob`` anywhere in the image grown by ``centre_margin_frac`` on every
+side (the body may be partly outside), otherwise uniformly where the whole body fits (a box from 0.5 apparent
+heights above the pelvis to 0.55 below it, 0.3 to each side). The pitch varies with the camera height, the
+distance and that pixel.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from humancal.camera import Camera, CameraRig
+from humancal.camera import Camera, CameraRig, intrinsic_matrix, look_at
 from humancal.lifter.config import VirtualCameraRanges
 from humancal.lifter.features import R_crop_from_cam
-from humancal.camera import intrinsic_matrix, look_at
 
 __all__ = ["focal_limits_px", "sample_virtual_cameras"]
 
@@ -79,6 +80,9 @@ def sample_virtual_cameras(
         distance = rng.uniform(low, high)
         azimuth = rng.uniform(0.0, 2.0 * np.pi)
         cam_height = rng.uniform(*ranges.camera_height_range_m)
+        if rng.random() < ranges.steep_fraction:  # looking down steeply: distance along the line of sight
+            pitch = np.radians(rng.uniform(*ranges.steep_pitch_range_deg))
+            distance, cam_height = distance * np.cos(pitch), pelvis_height_m + distance * np.sin(pitch)
         roll = rng.normal(0.0, ranges.roll_std_deg)
         truncated = rng.random() < ranges.truncation_prob
         where = rng.random(2)

@@ -37,6 +37,13 @@ class VirtualCameraRanges(Config):
             the focal range (a 640 px image with a 2500 px focal length would be a 15 deg telephoto).
         distance_range_m: (min, max) horizontal distance from the camera centre to the person, metres.
         camera_height_range_m: (min, max) height of the camera centre above the floor, metres.
+        steep_fraction: fraction of the cameras that look down steeply (ceiling, balcony and crane cameras):
+            their pitch below the horizon is drawn from ``steep_pitch_range_deg`` and the distance is measured
+            along the line of sight instead of the floor, which sets the camera height. From the height and
+            distance ranges alone fewer than 3 % of the cameras look down 45 degrees or more, and the lifter
+            trained on them tilted the poses such cameras see by about 6 degrees about the camera's x axis
+            (``docs/results/lifter.md``).
+        steep_pitch_range_deg: (min, max) pitch of the steep cameras below the horizon, degrees.
         apparent_height_range: (min, max) of the person's height in the image as a fraction of the image
             height; with the focal length it narrows the distance range.
         roll_std_deg: std of the roll about the optical axis, degrees.
@@ -58,6 +65,8 @@ class VirtualCameraRanges(Config):
     horizontal_fov_range_deg: tuple[float, float] = (30.0, 100.0)
     distance_range_m: tuple[float, float] = (2.0, 10.0)
     camera_height_range_m: tuple[float, float] = (0.5, 4.0)
+    steep_fraction: float = field(default=0.25, metadata=in_range(0.0, 1.0))
+    steep_pitch_range_deg: tuple[float, float] = (30.0, 75.0)
     apparent_height_range: tuple[float, float] = (0.1, 0.9)
     roll_std_deg: float = field(default=4.0, metadata=in_range(0.0, 45.0))
     truncation_prob: float = field(default=0.2, metadata=in_range(0.0, 1.0))
@@ -88,6 +97,7 @@ class VirtualCameraRanges(Config):
             ("horizontal_fov_range_deg", 5.0, 150.0),
             ("distance_range_m", 0.5, 50.0),
             ("camera_height_range_m", 0.0, 20.0),
+            ("steep_pitch_range_deg", 0.0, 89.0),
             ("apparent_height_range", 0.01, 5.0),
         ):
             object.__setattr__(self, name, ordered_pair(owner, name, getattr(self, name), low, high))

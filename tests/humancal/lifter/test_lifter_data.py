@@ -106,8 +106,13 @@ def test_virtual_cameras_look_like_real_rigs():
     cameras = sample_virtual_cameras(300, 1.75, 0.95, ranges, np.random.default_rng(5))
     heights = np.array([c.center_world_m[2] for c in cameras])
     distances = np.array([np.hypot(*c.center_world_m[:2]) for c in cameras])
-    assert heights.min() >= 0.5 and heights.max() <= 4.0
-    assert distances.min() >= 2.0 and distances.max() <= 10.0
+    pitch_deg = np.degrees(np.arctan2(heights - 0.95, distances))
+    line_of_sight = np.hypot(distances, heights - 0.95)
+    ordinary = (heights >= 0.5) & (heights <= 4.0) & (distances >= 2.0) & (distances <= 10.0)
+    steep = ((pitch_deg >= 30.0 - 1e-6) & (pitch_deg <= 75.0 + 1e-6) & (line_of_sight >= 2.0 - 1e-9)
+             & (line_of_sight <= 10.0 + 1e-9))  # the distance along the line of sight
+    assert np.all(ordinary | steep) and (~ordinary).any()
+    assert 0.1 < (pitch_deg >= 45.0).mean() < ranges.steep_fraction  # a share of ceiling-like cameras
     pelvis_px = []
     for cam in cameras:
         R = cam.R_cam_from_world
