@@ -5,8 +5,7 @@
 * :mod:`humancal.datasets.gt_matching`: which ground-truth person each 2D detection is, where a dataset does not say.
 * :mod:`humancal.datasets.shelf`: Shelf as 4D Association ships it (cameras, SHELF15 ground truth, OpenPose
   candidates grouped into people by :mod:`humancal.grouping`); ``docs/shelf.md``.
+
+The package imports none of them: the no-op shortcut of ``humancal update`` reads the datasets config through
+:mod:`~humancal.datasets.sequences` and must not pay for the readers' imports (torch, OpenCV).
 """
-
-from humancal.datasets.shelf import ShelfSequence, load_shelf
-
-__all__ = ["ShelfSequence", "load_shelf"]
