@@ -29,18 +29,10 @@ def _scene_indices(text: str) -> list[int]:
     return [int(x) for x in text.split(",")]
 
 
-def procrustes_rotation(lifted: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation taking the lifted joints (J, 3) onto the true ones (J, 3), both centred, finite joints only."""
-    ok = np.isfinite(lifted).all(1) & np.isfinite(truth).all(1)
-    a, b = lifted[ok] - lifted[ok].mean(0), truth[ok] - truth[ok].mean(0)
-    u, _, vt = np.linalg.svd(a.T @ b)
-    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-    return vt.T @ flip @ u.T
-
-
 def scene_tilts(scene, lifter) -> pd.DataFrame:
     """One row per lifted detection of a true person: the camera's pitch below the horizon at that person
     (degrees) and the rotation vector (degrees, camera axes) that aligns the lifted pose with the truth."""
+    from humancal.geometry.alignment import fit_similarity
     from humancal.lifter import lift_detections
     from humancal.tables.detections import detections_to_dense
 
@@ -62,7 +54,9 @@ def scene_tilts(scene, lifter) -> pd.DataFrame:
         joints_cam = joints_world @ camera.R_cam_from_world.T + camera.t_cam_from_world_m
         offset = camera.center_world_m - joints_world.mean(0)
         pitch = np.degrees(np.arctan2(offset[2], np.hypot(offset[0], offset[1])))
-        rotvec = Rotation.from_matrix(procrustes_rotation(lifted.joints_cam_m[d], joints_cam)).as_rotvec(degrees=True)
+        ok = np.isfinite(lifted.joints_cam_m[d]).all(1)  # the rigid motion taking the lifted pose onto the truth
+        rotation = fit_similarity(lifted.joints_cam_m[d][ok], joints_cam[ok], with_scale=False).R
+        rotvec = Rotation.from_matrix(rotation).as_rotvec(degrees=True)
         rows.append({"pitch_deg": pitch, "rot_x_deg": rotvec[0], "rot_y_deg": rotvec[1], "rot_z_deg": rotvec[2]})
     return pd.DataFrame(rows)
 
