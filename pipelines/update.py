@@ -48,6 +48,7 @@ from collections.abc import Callable, Iterable
 import dagster as dg
 
 from assets.checks import CheckOutcome
+from pipelines.cluster import ClusterSettings, RunRequest, run_on_cluster
 from pipelines.failure_record import FailureRecord
 from pipelines.run_guard import run_tags
 from pipelines.update_graph import UpdateGraph
@@ -94,6 +95,8 @@ def update(
     run_config: dict | None = None,
     failures: FailureRecord | None = None,
     before_run: Callable[[], None] | None = None,
+    cluster: ClusterSettings | None = None,
+    on_run_done: Callable[[str | None, bool, int, int], None] | None = None,
 ) -> UpdateResult:
     """Materialize missing or stale asset partitions, upstream first, until nothing that can run is left.
 
@@ -113,6 +116,10 @@ def update(
         run_config: Dagster run config of every run (e.g. log level).
         failures: the failures of earlier updates (read and updated; saved at the end); default: none remembered.
         before_run: called once before the first run (e.g. to quiet a library that prints on initialisation).
+        cluster: when given, every step runs on its Celery workers and the runs of a round (one per partition)
+            run at the same time (:mod:`pipelines.cluster`); default: one run after the other, in this process.
+        on_run_done: called as each run of a round ends, with its partition, whether it succeeded, how many runs
+            of the round have ended and how many it has.
 
     Raises:
         RuntimeError: something could still run after ``max_rounds`` rounds.
@@ -141,8 +148,13 @@ def update(
         if before_run is not None:
             before_run()
             before_run = None
-        for pk, keys in steps.items():
-            _run(u, r, pk, keys, run_config, done)
+        if cluster is None:
+            for n, (pk, keys) in enumerate(steps.items(), start=1):
+                result = _run(u, r, pk, keys, run_config, done)
+                if on_run_done:
+                    on_run_done(pk, result, n, len(steps))
+        else:
+            _run_round_on_cluster(u, r, steps, run_config, done, cluster, on_run_done)
         u.failures.save()
     left = [(k.to_user_string(), pk) for k, pk in u.scope() if not Round(u).status(k, pk).fresh]
     raise RuntimeError(f"still stale after {max_rounds} rounds: {left[:5]}")
@@ -159,8 +171,9 @@ def _steps_by_partition(graph: UpdateGraph, ready: list[AssetPartition]) -> dict
 
 
 def _run(u: UpdateState, r: Round, pk: str | None, keys: list[dg.AssetKey], run_config: dict | None,
-         done: list[tuple[str, str | None]]) -> None:
-    """Materialize ``keys`` of partition ``pk`` in one run and record what it produced, failed and checked."""
+         done: list[tuple[str, str | None]]) -> bool:
+    """Materialize ``keys`` of partition ``pk`` in one run, in this process, and record what it produced, failed
+    and checked; returns whether the run succeeded."""
     config, left_out = _fan_in_config(u, r, pk, keys, run_config)
     result = dg.materialize(
         assets=[*u.defs.assets, *(getattr(u.defs, "asset_checks", None) or [])],
@@ -172,6 +185,35 @@ def _run(u: UpdateState, r: Round, pk: str | None, keys: list[dg.AssetKey], run_
         tags=run_tags(),
         raise_on_error=False,
     )
+    _record(u, r, pk, keys, result, left_out, done)
+    return result.success
+
+
+def _run_round_on_cluster(u: UpdateState, r: Round, steps: dict[str | None, list[dg.AssetKey]],
+                          run_config: dict | None, done: list[tuple[str, str | None]], cluster: ClusterSettings,
+                          on_run_done: Callable[[str | None, bool, int, int], None] | None) -> None:
+    """The runs of one round (one per partition) at the same time, every step on the cluster's workers; each is
+    recorded as by :func:`_run`."""
+    requests, left_outs = [], {}
+    for pk, keys in steps.items():
+        config, left_outs[pk] = _fan_in_config(u, r, pk, keys, run_config)
+        requests.append(RunRequest(pk, tuple(k.to_user_string() for k in keys), config or {}))
+    ended = []
+
+    def report(request: RunRequest, result) -> None:
+        ended.append(request)
+        if on_run_done:
+            on_run_done(request.partition, result.success, len(ended), len(requests))
+
+    results = run_on_cluster(requests, u.instance, cluster, run_tags(), on_done=report)
+    for (pk, keys), result in zip(steps.items(), results):
+        _record(u, r, pk, keys, result, left_outs[pk], done)
+
+
+def _record(u: UpdateState, r: Round, pk: str | None, keys: list[dg.AssetKey], result,
+            left_out: dict[dg.AssetKey, dict[str, str]], done: list[tuple[str, str | None]]) -> None:
+    """Record what the run of ``keys`` in partition ``pk`` produced, failed and checked (``result``: Dagster's
+    execution result, in-process or not)."""
     produced = {e.asset_key for e in result.get_asset_materialization_events()}
     u.note_checks((CheckOutcome.of(e, pk) for e in result.get_asset_check_evaluations()), earlier=False)
     for key in keys:

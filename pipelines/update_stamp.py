@@ -13,8 +13,9 @@ The fingerprint covers:
 * the source and data files of the packages (``humancal``, ``assets``, ``resources``, ``pipelines``,
   ``evaluation``): code versions, shipped weights, the packaged datasets config and the paper's numbers live there;
   the interpreter's version and its site-packages folders (an installed or removed package changes them);
-* the settings: ``HUMANCAL_DATA_DIR``, ``HUMANCAL_DATASETS``, ``HUMANCAL_STATE_DIR``, the folders at the top of the
-  data root (which sequences can be registered), the datasets config files and the user datasets file;
+* the settings: ``HUMANCAL_DATA_DIR``, ``HUMANCAL_DATASETS``, ``HUMANCAL_STATE_DIR``, ``HUMANCAL_CELERY_BROKER``,
+  the folders at the top of the data root (which sequences can be registered), the datasets config files and the
+  user datasets file;
 * the Dagster instance's storage files under ``<state dir>/dagster_home`` (any run, materialization, check
   evaluation or partition change writes them) and its ``dagster.yaml``; the shortcut is off when that file
   configures another storage (a database server), whose changes leave no trace here;
@@ -38,7 +39,7 @@ __all__ = ["Output", "fingerprint", "replay", "store"]
 
 FILE_NAME = "update_stamp.json"
 PACKAGES = ("humancal", "assets", "resources", "pipelines", "evaluation")
-SETTINGS = ("HUMANCAL_DATA_DIR", "HUMANCAL_DATASETS", "HUMANCAL_STATE_DIR")
+SETTINGS = ("HUMANCAL_DATA_DIR", "HUMANCAL_DATASETS", "HUMANCAL_STATE_DIR", "HUMANCAL_CELERY_BROKER")
 MAX_ENTRIES = 8
 DEFAULT_DAGSTER_YAML = "telemetry:\n  enabled: false\n"
 

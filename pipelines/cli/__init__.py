@@ -15,6 +15,7 @@
     humancal add NAME --openpose DIR ... --image-size WxH   register your own capture (pipelines/cli/add.py)
     humancal remove NAME [--sequence SEQ]   forget a capture you added: config entry, partitions, artifacts
     humancal ui                          the Dagster UI on 127.0.0.1
+    humancal worker                      a Celery worker for `update` on a cluster (docs/cluster.md)
     humancal -v COMMAND ...              (or COMMAND -v) also print what was left waiting and why
 
 All commands share one persistent Dagster instance in ``<state dir>/dagster_home`` (telemetry off),
@@ -251,6 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_benchmark_command(sub, cmd_update, _instance, QUIET_RUN_CONFIG)
     from pipelines.cli.view import add_parser as add_view_command  # humancal view --partition P [--save F]
     add_view_command(sub)
+    from pipelines.cli.worker import add_parser as add_worker_command  # humancal worker [--concurrency N]
+    add_worker_command(sub)
     p = sub.add_parser("ui", help="start the Dagster UI (dagster dev) on 127.0.0.1")
     p.add_argument("--port", type=int, default=3000)
     p.set_defaults(func=cmd_ui)

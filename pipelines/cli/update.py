@@ -52,6 +52,7 @@ def _update_and_report(out: Output, key: str, partitions: list[str] | None, afte
     """Run the update, print its report (then ``after(result, out)``, which may print more and override the
     status), and record the output for the shortcut when nothing was left to do."""
     from humancal.settings import state_dir
+    from pipelines.cluster import ClusterSettings
     from pipelines.definitions import defs
     from pipelines.failure_record import FailureRecord
     from pipelines.quiet_warp import init_warp_quietly
@@ -67,11 +68,15 @@ def _update_and_report(out: Output, key: str, partitions: list[str] | None, afte
     shortcut = _is_persistent(instance)
     before = fingerprint(key) if shortcut else None
     failures = FailureRecord.in_state_dir(state_dir())
+    cluster = ClusterSettings.from_env()
+    if cluster is not None:
+        out(f"steps run on the Celery workers of {cluster.broker_url} (humancal worker); the runs of a round at once")
     t0 = time.perf_counter()
 
     def run():
         return update(defs, instance, partitions=partitions, exclude=exclude, on_round=_round_printer(out),
-                      run_config=_run_config(out.verbose), failures=failures, before_run=init_warp_quietly)
+                      run_config=_run_config(out.verbose), failures=failures, before_run=init_warp_quietly,
+                      cluster=cluster, on_run_done=_run_printer(out) if cluster is not None else None)
 
     result = run()
     out(f"materialized {result.count} asset partitions" + (f" in {time.perf_counter() - t0:.1f} s" if result.count else ""))
@@ -120,6 +125,13 @@ def _round_printer(out: Output):
         out(f"round {n}: {len(items)} stale or missing: {names}")
 
     return print_round
+
+
+def _run_printer(out: Output):
+    def print_run(partition, success, ended, total) -> None:
+        out(f"  run {ended}/{total} ended: {partition or 'shared assets'}{'' if success else ' (failed)'}")
+
+    return print_run
 
 
 def _user_datasets() -> set[str]:
