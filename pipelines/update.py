@@ -33,6 +33,9 @@ Dagster does that within one run; the update runs one level of the graph per run
 of the latest materialization of every input before it runs anything (:func:`assets.checks.latest_check_outcomes`),
 also when the check failed in an earlier update.
 
+On a cluster (``HUMANCAL_CELERY_BROKER``: :mod:`pipelines.cluster`), the runs of a round start together and every
+step runs on a Celery worker; what is recorded, and how failures and checks are handled, is the same.
+
 Kill -9 in the middle of an update is safe: artifacts are written atomically and a materialization is recorded
 only after its artifact is in place, so the next update finds the interrupted asset partitions missing or stale;
 the runs it left "started" are marked failed by the next command that opens the instance
@@ -150,9 +153,9 @@ def update(
             before_run = None
         if cluster is None:
             for n, (pk, keys) in enumerate(steps.items(), start=1):
-                result = _run(u, r, pk, keys, run_config, done)
+                succeeded = _run(u, r, pk, keys, run_config, done)
                 if on_run_done:
-                    on_run_done(pk, result, n, len(steps))
+                    on_run_done(pk, succeeded, n, len(steps))
         else:
             _run_round_on_cluster(u, r, steps, run_config, done, cluster, on_run_done)
         u.failures.save()

@@ -8,6 +8,7 @@ Everything is stopped and the temporary folder removed at the end (``--keep DIR`
 
     python scripts/local_cluster.py --workers 2 --partitions 12 --kill-after 60
     python scripts/local_cluster.py --workers 1 --partitions 12 --json one_worker.json
+    python scripts/local_cluster.py --workers 0 --partitions 12     # the baseline: no cluster, steps in-process
 
 Prints a summary (and writes it as JSON with ``--json``): partitions per minute, the lines of both updates, which
 worker was killed. Exit status 1 when a partition was not materialized or the second update did anything.
@@ -103,8 +104,10 @@ def postgres_server(folder: Path):
         shutil.chown(sockets, "postgres")
     port = free_port()
     log = folder / "postgres.log"
-    subprocess.run([*as_user, _postgres_bin("initdb"), "-D", str(data), "-U", "humancal", "--auth=trust",
-                    "--no-sync", "-E", "UTF8"], check=True, capture_output=True)
+    done = subprocess.run([*as_user, _postgres_bin("initdb"), "-D", str(data), "-U", "humancal", "--auth=trust",
+                           "--no-sync", "-E", "UTF8"], capture_output=True, text=True)
+    if done.returncode:
+        raise RuntimeError(f"initdb failed: {(done.stderr or done.stdout).strip()}")
     subprocess.run([*as_user, _postgres_bin("pg_ctl"), "-D", str(data), "-l", str(log), "-w", "-o",
                     f"-p {port} -k {sockets} -c listen_addresses=127.0.0.1 -c fsync=off", "start"],
                    check=True, capture_output=True)
@@ -117,10 +120,10 @@ def postgres_server(folder: Path):
                        capture_output=True)
 
 
-def start_worker(name: str, env: dict[str, str], folder: Path) -> subprocess.Popen:
+def start_worker(name: str, env: dict[str, str], folder: Path, threads: int) -> subprocess.Popen:
     """``humancal worker`` in its own process group (so that it can be killed whole); waits until it is ready."""
     log = folder / f"worker_{name}.log"
-    proc = subprocess.Popen([*HUMANCAL, "worker", "--name", f"{name}@%h"], env=env, cwd=REPO,
+    proc = subprocess.Popen([*HUMANCAL, "worker", "--name", f"{name}@%h", "--threads", str(threads)], env=env, cwd=REPO,
                             stdout=open(log, "w"), stderr=subprocess.STDOUT, start_new_session=True)
     _wait(f"worker {name} (log: {log})", lambda: " ready." in log.read_text(), timeout_s=120, proc=proc)
     return proc
@@ -183,7 +186,8 @@ def humancal_update(partitions: list[str], env: dict[str, str], kill=None) -> tu
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=int, default=2,
+                        help="Celery workers; 0: no cluster at all, every step in the humancal process (the baseline)")
     parser.add_argument("--partitions", type=int, default=12)
     parser.add_argument("--kill-after", type=float, default=None,
                         help="kill -9 the first worker this many seconds into the update, as soon as it runs a step")
@@ -192,8 +196,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep", type=Path, default=None,
                         help="a new folder to work in and keep (state/, services/ with the workers' logs)")
     args = parser.parse_args(argv)
-    if args.workers < 1 or args.partitions < 1:
-        parser.error("--workers and --partitions must be >= 1")
+    if args.workers < 0 or args.partitions < 1:
+        parser.error("--workers must be >= 0 and --partitions >= 1")
     if args.kill_after is not None and args.workers < 2:
         parser.error("--kill-after needs --workers 2 or more (a worker must be left to finish)")
 
@@ -203,24 +207,30 @@ def main(argv: list[str] | None = None) -> int:
             folder.mkdir(parents=True, exist_ok=False)
         else:
             folder = Path(tempfile.mkdtemp(prefix="humancal_cluster_"))
+            folder.chmod(0o755)  # as root, Postgres runs as the postgres user, who must reach services/
             stack.callback(shutil.rmtree, folder, ignore_errors=True)
         state, services = folder / "state", folder / "services"
         state.mkdir()
         services.mkdir()
-        broker = stack.enter_context(redis_server(services))
-        env = dict(os.environ, HUMANCAL_STATE_DIR=str(state), HUMANCAL_CELERY_BROKER=broker,
-                   HUMANCAL_CELERY_VISIBILITY_TIMEOUT_S=os.environ.get("HUMANCAL_CELERY_VISIBILITY_TIMEOUT_S", "60"),
+        env = dict(os.environ, HUMANCAL_STATE_DIR=str(state),
                    ANNY_CACHE_DIR=os.environ.get("ANNY_CACHE_DIR", str(REPO / ".humancal" / "cache" / "anny")))
-        if not args.no_postgres:
-            env["HUMANCAL_POSTGRES_URL"] = stack.enter_context(postgres_server(services))
+        for name in ("HUMANCAL_CELERY_BROKER", "HUMANCAL_CELERY_BACKEND", "HUMANCAL_POSTGRES_URL"):
+            env.pop(name, None)
+        broker = None
+        if args.workers:
+            broker = env["HUMANCAL_CELERY_BROKER"] = stack.enter_context(redis_server(services))
+            env["HUMANCAL_CELERY_VISIBILITY_TIMEOUT_S"] = os.environ.get("HUMANCAL_CELERY_VISIBILITY_TIMEOUT_S", "120")
+            if not args.no_postgres:
+                env["HUMANCAL_POSTGRES_URL"] = stack.enter_context(postgres_server(services))
         partitions = write_batch(state, args.partitions)
-        print(f"broker {broker}; instance {env.get('HUMANCAL_POSTGRES_URL', 'SQLite in the state dir')}; "
+        print(f"broker {broker or 'none (steps in the humancal process)'}; "
+              f"instance {env.get('HUMANCAL_POSTGRES_URL', 'SQLite in the state dir')}; "
               f"state {state}; {len(partitions)} partitions", flush=True)
-        workers = []
+        workers, threads = [], max(1, (os.cpu_count() or 1) // max(1, args.workers))  # each its share of the cores
         for i in range(args.workers):
-            workers.append(start_worker(f"w{i + 1}", env, services))
+            workers.append(start_worker(f"w{i + 1}", env, services, threads))
             stack.callback(stop, workers[-1])
-        print(f"{len(workers)} workers ready", flush=True)
+        print(f"{len(workers)} workers ready, {threads} threads each", flush=True)
         killed = []
 
         def kill_first():
@@ -234,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
         again_status, again, _ = humancal_update(partitions, env)
         materialized = [int(m.group(1)) for line in again for m in [re.match(r"materialized (\d+) asset", line)] if m]
         summary = {
-            "workers": args.workers, "partitions": len(partitions), "postgres": not args.no_postgres,
+            "workers": args.workers, "partitions": len(partitions), "postgres": "HUMANCAL_POSTGRES_URL" in env,
             "killed": killed, "first_update": {"status": status, "seconds": round(seconds, 1), "lines": lines},
             "partitions_per_minute": round(len(partitions) / seconds * 60, 2),
             "second_update": {"status": again_status, "lines": again,

@@ -21,7 +21,7 @@ def test_packaged_config_has_the_demo_sequence():
 
 
 def test_available_sequences_need_their_data_folder(tmp_path):
-    specs = load_datasets_config()
+    specs = load_datasets_config(user_path=tmp_path / "no_user_datasets.yaml")  # not the captures added here
     assert {s.key for s in available_sequences(specs, None)} == {"synthetic__demo", "synthetic__tiny", "synthetic__benchmark"}
     (tmp_path / "shelf_4dassoc").mkdir()
     assert "shelf__test" in {s.key for s in available_sequences(specs, tmp_path)}

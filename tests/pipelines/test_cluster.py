@@ -62,11 +62,12 @@ def test_worker_runs_celery_with_the_projects_app(monkeypatch, tmp_path):
     monkeypatch.setattr("os.execvpe", exec_instead)
     monkeypatch.setattr("os.chdir", lambda path: None)
     monkeypatch.setattr("signal.signal", lambda *a: None)
-    assert main(["worker", "--name", "a@b"]) == 0
+    assert main(["worker", "--name", "a@b", "--threads", "3"]) == 0
     argv = seen["argv"]
     assert argv[1:5] == ["-m", "celery", "-A", "pipelines.celery_app"] and "worker" in argv
     assert argv[argv.index("-Q") + 1] == "dagster" and argv[argv.index("--hostname") + 1] == "a@b"
     assert argv[argv.index("--pool") + 1] == "solo"  # one step at a time, in the worker's own process
+    assert seen["env"]["OMP_NUM_THREADS"] == seen["env"]["OPENBLAS_NUM_THREADS"] == "3"
     assert seen["env"]["DAGSTER_HOME"] == str(tmp_path / "dagster_home")
 
 
