@@ -153,9 +153,11 @@ def write_batch(state: Path, count: int) -> list[str]:
 
 
 def busy(log: Path) -> bool:
-    """Whether the worker writing ``log`` is running a step now (it took more than it finished)."""
+    """Whether the worker writing ``log`` is running a step now: a task it received and has not ended."""
     text = log.read_text()
-    return text.count("] received") > len(re.findall(r"\] (succeeded|raised|retry)", text))
+    received = set(re.findall(r"Task execute_plan\[([0-9a-f-]+)\] received", text))
+    ended = set(re.findall(r"Task execute_plan\[([0-9a-f-]+)\] (?:succeeded|raised|retry)", text))
+    return bool(received - ended)
 
 
 def humancal_update(partitions: list[str], env: dict[str, str], kill=None) -> tuple[int, list[str], float]:

@@ -124,7 +124,7 @@ def test_twelve_captures_on_two_workers_survive_a_killed_worker(tmp_path):
     assert summary_file.exists(), proc.stdout[-3000:] + proc.stderr[-3000:]
     summary = json.loads(summary_file.read_text())
     first, second = summary["first_update"], summary["second_update"]
-    assert summary["postgres"] and summary["killed"] == ["w1"]
+    assert summary["postgres"] and summary["killed"] == ["w1"], proc.stdout[-3000:]
     assert first["status"] == 0, "\n".join(first["lines"][-30:])
     assert not [line for line in first["lines"] if "FAILED" in line or line.startswith("ERROR")]
     assert second["status"] == 0 and second["materialized"] == 0, "\n".join(second["lines"])
