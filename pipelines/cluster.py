@@ -36,7 +36,7 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-__all__ = ["BROKER_ENV", "ClusterSettings", "RunRequest", "run_on_cluster", "selection_job"]
+__all__ = ["BROKER_ENV", "ClusterSettings", "RunRequest", "answering_workers", "run_on_cluster", "selection_job"]
 
 BROKER_ENV = "HUMANCAL_CELERY_BROKER"
 BACKEND_ENV = "HUMANCAL_CELERY_BACKEND"
@@ -99,6 +99,25 @@ class ClusterSettings:
         """The arguments of ``dagster_celery.make_app.make_app`` for the workers' app."""
         return {"broker": self.broker_url, "backend": self.backend_url, "include": [],
                 "config_source": self.celery_config()}
+
+
+def answering_workers(settings: ClusterSettings, timeout_s: float = 3.0) -> list[str]:
+    """The names of the workers that answer a ping within ``timeout_s`` (a worker busy with a step does not answer).
+
+    Raises:
+        ValueError: the broker cannot be reached; the message names the URL and the variable.
+    """
+    from dagster_celery.make_app import make_app
+
+    app = make_app(settings.app_args())
+    try:
+        with app.connection_for_write() as connection:
+            connection.ensure_connection(max_retries=1, timeout=timeout_s)
+    except Exception as err:  # kombu raises the transport's own errors
+        why = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ValueError(f"{BROKER_ENV}={settings.broker_url}: the broker cannot be reached ({why}); start it, or "
+                         f"unset {BROKER_ENV} to run the steps here (docs/cluster.md)") from None
+    return sorted(name for answer in app.control.ping(timeout=timeout_s) for name in answer)
 
 
 def selection_job(asset_keys: Sequence[str]):

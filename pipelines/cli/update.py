@@ -70,7 +70,15 @@ def _update_and_report(out: Output, key: str, partitions: list[str] | None, afte
     failures = FailureRecord.in_state_dir(state_dir())
     cluster = ClusterSettings.from_env()
     if cluster is not None:
+        from pipelines.cluster import answering_workers
+
+        workers = answering_workers(cluster)
         out(f"steps run on the Celery workers of {cluster.broker_url} (humancal worker); the runs of a round at once")
+        if workers:
+            out(f"{len(workers)} worker(s) answered: {', '.join(workers)}")
+        else:
+            out("no worker answered within 3 s (none started, or every one busy with a step): the steps wait on the "
+                "broker until a `humancal worker` with the same HUMANCAL_* settings takes them", "err")
     t0 = time.perf_counter()
 
     def run():

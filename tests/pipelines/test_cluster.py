@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from pipelines.cli import main
-from pipelines.cluster import ClusterSettings, _no_empty_logging_reconfiguration, selection_job
+from pipelines.cluster import ClusterSettings, _no_empty_logging_reconfiguration, answering_workers, selection_job
 from pipelines.instance import configure_instance_env, instance_config
 
 REPO = Path(__file__).resolve().parents[2]
@@ -41,6 +41,17 @@ def test_no_broker_means_no_cluster_and_a_broker_configures_both_sides():
 def test_a_malformed_setting_is_named(env, words):
     with pytest.raises(ValueError, match=words):
         ClusterSettings.from_env(env)
+
+
+def test_an_unreachable_broker_is_an_error_naming_it(monkeypatch, tmp_path, capsys):
+    import socket
+
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.setenv("HUMANCAL_CELERY_BROKER", f"redis://127.0.0.1:{port}/0")
+    with pytest.raises(ValueError, match=f"HUMANCAL_CELERY_BROKER=redis://127.0.0.1:{port}/0: the broker cannot be"):
+        answering_workers(ClusterSettings.from_env())
 
 
 def test_worker_without_a_broker_says_which_variable(monkeypatch, tmp_path, capsys):
