@@ -15,7 +15,7 @@ from pathlib import Path
 
 __all__ = ["configure_instance_env", "dagster_home", "instance_config", "persistent_instance"]
 
-POSTGRES_ENV = "HUMANCAL_POSTGRES_URL"  # also pipelines.cluster.POSTGRES_ENV (that module imports dagster)
+POSTGRES_ENV = "HUMANCAL_POSTGRES_URL"
 _LOCAL = "telemetry:\n  enabled: false\n"
 _POSTGRES = _LOCAL + f"storage:\n  postgres:\n    postgres_url:\n      env: {POSTGRES_ENV}\n"
 
