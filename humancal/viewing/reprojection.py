@@ -59,27 +59,47 @@ def reprojected_fit(keypoints_world_m: dict[int, tuple[np.ndarray, np.ndarray]],
         detections: the view's rows of a ``raw_detections`` table.
         people: :func:`detection_people` of the association.
     """
-    by_frame = {int(f): rows for f, rows in detections.groupby("frame")}
-    per_frame: dict[int, dict[int, tuple[np.ndarray, np.ndarray]]] = {}
+    projected: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    out_people: dict[int, dict[int, tuple[np.ndarray, np.ndarray]]] = {}
     for person_id, (frames, keypoints) in keypoints_world_m.items():
         pixels, depth = project_points(camera, keypoints.reshape(-1, 3))
         pixels = pixels.reshape(len(frames), NUM_JOINTS, 2)
         in_front = depth.reshape(len(frames), NUM_JOINTS) > 0
+        order = np.argsort(frames, kind="stable")
+        projected[int(person_id)] = (np.asarray(frames, dtype=np.int64)[order], pixels[order], in_front[order])
         for frame, px, ok in zip(frames, pixels, in_front):
-            per_frame.setdefault(int(frame), {})[int(person_id)] = (px, ok)
-    out = {}
-    for frame, fitted in per_frame.items():
-        errors: list[float] = []
-        rows = by_frame.get(frame)
-        if rows is not None:
-            for det_id, det in rows.groupby("det_id"):
-                person_id = people.get((frame, view, int(det_id)))
-                if person_id not in fitted:
-                    continue
-                px, ok = fitted[person_id]
-                seen = det[det["score"] > 0]
-                index = joint_index(seen["joint"])
-                distance = np.linalg.norm(px[index] - seen[["x_px", "y_px"]].to_numpy(), axis=1)
-                errors += distance[np.isfinite(distance) & ok[index]].tolist()
-        out[frame] = FrameFit(fitted, float(np.mean(errors)) if errors else float("nan"))
-    return out
+            out_people.setdefault(int(frame), {})[int(person_id)] = (px, ok)
+    sums, counts = _error_sums(projected, view, detections, people)
+    return {frame: FrameFit(fitted, sums[frame] / counts[frame] if frame in counts else float("nan"))
+            for frame, fitted in out_people.items()}
+
+
+def _error_sums(projected: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]], view: int,
+                detections: pd.DataFrame, people: dict[tuple[int, int, int], int]
+                ) -> tuple[dict[int, float], dict[int, int]]:
+    """Per frame, the sum of the distances (pixels) between the confident detected keypoints of ``view`` and the
+    same person's reprojected fitted keypoints (in front of the camera, finite), and their count; frames without
+    any are left out. ``projected``: person id -> ((T,) increasing frames, (T, 23, 2) pixels, (T, 23) in front).
+    Vectorised over the detection rows (a capture has hundreds of thousands)."""
+    seen = detections[detections["score"] > 0]
+    frame = seen["frame"].to_numpy(dtype=np.int64)
+    det_id = seen["det_id"].to_numpy(dtype=np.int64)
+    person = np.fromiter((people.get((f, view, d), -1) for f, d in zip(frame.tolist(), det_id.tolist())),
+                         dtype=np.int64, count=len(seen))
+    joint = joint_index(seen["joint"])
+    detected_px = seen[["x_px", "y_px"]].to_numpy(dtype=np.float64)
+    distance = np.full(len(seen), np.nan)
+    for person_id, (frames, pixels, in_front) in projected.items():
+        rows = np.flatnonzero(person == person_id)
+        if len(frames) == 0 or len(rows) == 0:
+            continue
+        slot = np.searchsorted(frames, frame[rows]).clip(max=len(frames) - 1)
+        fitted = frames[slot] == frame[rows]
+        rows, slot = rows[fitted], slot[fitted]
+        ok = in_front[slot, joint[rows]]
+        distance[rows[ok]] = np.linalg.norm(pixels[slot[ok], joint[rows[ok]]] - detected_px[rows[ok]], axis=1)
+    keep = np.isfinite(distance)
+    unique, inverse = np.unique(frame[keep], return_inverse=True)
+    sums = np.bincount(inverse, weights=distance[keep], minlength=len(unique))
+    counts = np.bincount(inverse, minlength=len(unique))
+    return ({int(f): float(s) for f, s in zip(unique, sums)}, {int(f): int(c) for f, c in zip(unique, counts)})
