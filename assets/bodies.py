@@ -97,7 +97,10 @@ def body_fit(context: dg.AssetExecutionContext, config: BodyFitSettings, body_mo
         fps=fps, reprojection_error_px=round(result.reprojection_error_px, 3), cameras=fit_config.cameras,
         **{f"seconds_{stage}": round(s, 3) for stage, s in result.stage_seconds.items()},
         **{f"loss_{term}": float(v) for term, v in result.loss_terms.items()},
-        prior_weights=checkpoint_content_version(motion_prior_checkpoint)[:12], warnings="; ".join(result.warnings) or "none", **pictures)
+        camera_rounds=len(result.round_shifts_px),
+        camera_round_shifts_px=", ".join(f"{shift:.3f}" for shift in result.round_shifts_px) or "none",
+        prior_weights=checkpoint_content_version(motion_prior_checkpoint)[:12],
+        warnings="; ".join(result.warnings) or "none", **pictures)
     changes = _camera_changes(rig, refined)
     context.log.info(f"{sequence}: cameras ({fit_config.cameras}) moved by " + ", ".join(
         f"{k} {v:.3g}" for k, v in changes.items()))

@@ -217,6 +217,7 @@ class BodyFitSettings(dg.Config):
     refine_k1: bool = library_field(_B, "refine_k1")
     bundle_start: bool = library_field(_B, "bundle_start")
     rounds: int = library_field(_B, "rounds")
+    round_stop_px: float = library_field(_B, "round_stop_px")
     iterations_cameras: int = library_field(_B, "iterations_cameras")
     weight_camera_prior: float = library_field(_B, "weight_camera_prior")
     camera_prior_scale_m: float = library_field(_B, "camera_prior_scale_m")

@@ -27,7 +27,7 @@ from torch import Tensor
 
 from humancal.camera import CameraRig, RigTensors
 
-__all__ = ["CAMERA_REGIMES", "CameraVariables"]
+__all__ = ["CAMERA_REGIMES", "CameraVariables", "camera_shift_px"]
 
 CAMERA_REGIMES = ("fixed", "ext", "int_ext")
 """Which camera parameters a fit moves (module docstring)."""
@@ -129,3 +129,14 @@ class CameraVariables:
         """Move the world origin by ``-offset_m`` (the cameras' centres move by ``-offset_m``; (3,) metres)."""
         with torch.no_grad():
             self.centre_m -= offset_m
+
+
+def camera_shift_px(cameras: CameraVariables, before: Tensor, points_world_m: Tensor) -> float:
+    """How far a change of the cameras moves what they see: the mean distance, pixels, between ``points_world_m``
+    ((N, 3), metres) projected through the cameras at ``before`` ((V, p), :meth:`CameraVariables.parameters`) and
+    through the cameras now, over every view and every point in front of the camera both times (NaN: none)."""
+    with torch.no_grad():
+        old, _, front_old = cameras.tensors_at(**cameras.unpack(before)).project(points_world_m)
+        new, _, front_new = cameras.tensors().project(points_world_m)
+        seen = front_old & front_new
+        return float((new - old).norm(dim=-1)[seen].mean()) if bool(seen.any()) else float("nan")

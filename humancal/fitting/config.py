@@ -61,8 +61,9 @@ class BodyFitConfig(Config):
         refine_k1: whether each view's first radial distortion coefficient moves too (with ``ext``/``int_ext``).
         bundle_start: whether moving cameras (``ext``, ``int_ext``) first take a bundle adjustment on the
             triangulated joints as free points (:func:`humancal.fitting.joint_bundle.bundle_adjust_on_joints`,
-            regime ``cameras``) before the joint refinement starts from them. Free points take up a detector's own definition of the
-            joints, which the bodies cannot (``docs/refinement.md``, "A detector with its own joints").
+            regime ``cameras``) before the joint refinement starts from them. Free points take up a detector's own
+            definition of the joints, which the bodies cannot (``docs/refinement.md``, "A detector with its own
+            joints").
         bundle_solver: how that bundle adjustment is solved (``humancal.fitting.joint_bundle``): ``lm``
             (Levenberg-Marquardt with the points eliminated, run to convergence) or ``lbfgs`` (100 L-BFGS
             iterations, which stop short of the minimum; ``docs/results/refinement.md``).
@@ -71,6 +72,9 @@ class BodyFitConfig(Config):
             the solve costs in proportion to the frames).
         rounds: how many times the three substages on the 2D detections (cameras, global, body) run in turn
             (with ``fixed`` cameras, the camera substage is skipped).
+        round_stop_px: the rounds end early after a round whose camera substage moved the cameras less than this:
+            the mean distance, pixels, between the fitted keypoints projected through every view before and after
+            that substage (:func:`humancal.fitting.cameras.camera_shift_px`); 0: always ``rounds`` rounds.
         iterations_cameras: L-BFGS iterations of the camera substage (bodies held).
         weight_camera_prior: weight of the mean squared camera change from the initial cameras (focal in log
             units, rotation in radians, centre in units of ``camera_prior_scale_m``); a weak tie that keeps views
@@ -111,6 +115,7 @@ class BodyFitConfig(Config):
     bundle_solver: str = "lm"
     bundle_max_frames: int = field(default=300, metadata=at_least(1, integer=True))
     rounds: int = field(default=3, metadata=at_least(0, integer=True))
+    round_stop_px: float = field(default=0.0, metadata=at_least(0))
     iterations_cameras: int = field(default=50, metadata=at_least(0, integer=True))
     weight_camera_prior: float = field(default=1e-6, metadata=at_least(0))
     camera_prior_scale_m: float = field(default=0.1, metadata=positive())

@@ -54,6 +54,7 @@ from torch import Tensor
 from humancal.body import BodyModel
 from humancal.calibration.types import FOOT_JOINTS
 from humancal.camera import CameraRig
+from humancal.fitting.cameras import camera_shift_px
 from humancal.fitting.config import BodyFitConfig
 from humancal.fitting.joint_bundle import bundle_adjust_on_joints
 from humancal.fitting.motions import FittedMotions
@@ -85,6 +86,9 @@ class BodyFitResult:
         reprojection_error_px: mean pixel distance between the fitted keypoints and the detected ones, over every
             detected keypoint (score > 0) in front of its camera.
         warnings: people left out, and other things that did not stop the fit.
+        round_shifts_px: per round of the substages run with moving cameras, how far its camera substage moved
+            the cameras (mean reprojection shift of the people's keypoints, pixels; ``BodyFitConfig.round_stop_px``);
+            empty with fixed cameras.
     """
 
     motions: FittedMotions
@@ -94,6 +98,7 @@ class BodyFitResult:
     loss_terms: dict[str, float]
     reprojection_error_px: float
     warnings: tuple[str, ...] = ()
+    round_shifts_px: tuple[float, ...] = ()
 
 
 def fit_bodies(
@@ -153,7 +158,8 @@ def fit_bodies(
     motions = _fitted_motions(final, problem, setup.observations, fps)
     latents = _to_numpy(problem.pose_params) if problem.latent else None
     cameras = problem.cameras.to_rig() if problem.cameras.moves else start_cameras.rig
-    return BodyFitResult(motions, cameras, latents, seconds, run.terms, final.reprojection_px, tuple(fit_warnings))
+    return BodyFitResult(motions, cameras, latents, seconds, run.terms, final.reprojection_px, tuple(fit_warnings),
+                         run.round_shifts_px)
 
 
 @dataclass(frozen=True)
@@ -224,19 +230,24 @@ class _StagesRun:
     Attributes:
         terms: the last stage's terms, unweighted, and ``total`` (weighted); empty when no stage ran.
         seconds: wall seconds of each of ``STAGES`` (summed over rounds; fit3d's include its half-rate start).
+        round_shifts_px: per round run, how far its camera substage moved the cameras
+            (:func:`~humancal.fitting.cameras.camera_shift_px` over the people's keypoints), pixels.
     """
 
     terms: dict[str, float]
     seconds: dict[str, float]
+    round_shifts_px: tuple[float, ...] = ()
 
 
 def _run_schedule(body: BodyModel, setup: _Setup, rig: CameraRig, config: BodyFitConfig,
                 progress: Callable[[str, int, float], None] | None) -> _StagesRun:
     """fit3d's half-rate start (on long sequences, :func:`~humancal.fitting.schedule.half_rate_steps`), then every
-    stage of the schedule in turn on every frame (:func:`~humancal.fitting.schedule.stage_schedule`)."""
+    stage of the schedule in turn on every frame (:func:`~humancal.fitting.schedule.stage_schedule`); the rounds end
+    early after one whose cameras moved less than ``config.round_stop_px``."""
     problem = setup.problem
     seconds = dict.fromkeys(STAGES, 0.0)
     terms: dict[str, float] = {}
+    shifts: list[float] = []
     half_rate = half_rate_steps(config, setup.observations.num_frames)
     if half_rate:
         stage_start = time.perf_counter()
@@ -245,14 +256,30 @@ def _run_schedule(body: BodyModel, setup: _Setup, rig: CameraRig, config: BodyFi
         log.info("body fit, fit3d on every other frame: %s in %.1f s", ", ".join(
             f"{k} {v:.4g}" for k, v in terms.items()), time.perf_counter() - stage_start)
     for stage, iterations in stage_schedule(config, problem.cameras.moves, half_rate):
+        if stage == "cameras" and shifts and shifts[-1] < config.round_stop_px:
+            log.info("body fit: the cameras moved %.3f px in round %d (less than %g px): no further round",
+                     shifts[-1], len(shifts), config.round_stop_px)
+            break
         stage_start = time.perf_counter()
+        before = problem.cameras.parameters().detach().clone() if stage == "cameras" else None
         # fit3d's every-frame steps continue the learning-rate decay where the half-rate steps left it
         schedule = (half_rate, config.iterations_3d) if stage == "fit3d" else None
         terms = run_stage(problem, stage, iterations, progress, schedule)
+        if before is not None:
+            shifts.append(_round_shift_px(problem, before))
         seconds[stage] += time.perf_counter() - stage_start
-        log.info("body fit, %s: %s in %.1f s", stage, ", ".join(f"{k} {v:.4g}" for k, v in terms.items()),
-                 time.perf_counter() - stage_start)
-    return _StagesRun(terms, seconds)
+        log.info("body fit, %s: %s in %.1f s%s", stage, ", ".join(f"{k} {v:.4g}" for k, v in terms.items()),
+                 time.perf_counter() - stage_start, f"; the cameras moved {shifts[-1]:.3f} px" if before is not None
+                 else "")
+    return _StagesRun(terms, seconds, tuple(shifts))
+
+
+def _round_shift_px(problem: BodyFitProblem, before: Tensor) -> float:
+    """How far the camera substage just run moved the cameras (``before``: their parameters at its start), over
+    the people's keypoints of every present person-frame, pixels."""
+    with torch.no_grad():
+        keypoints, _, _ = problem.keypoints()
+        return camera_shift_px(problem.cameras, before, keypoints[problem.present].reshape(-1, 3))
 
 
 def _fit_half_rate(body: BodyModel, setup: _Setup, rig: CameraRig, config: BodyFitConfig, steps: int,

@@ -49,7 +49,8 @@ def test_the_variables_start_at_the_rig_and_carry_gradients(scene_inputs):  # no
     np.testing.assert_allclose(with_k1.to_rig().distortion[:, 0], rig.distortion[:, 0] + 0.01)
     with pytest.raises(ValueError, match="camera regime 'intrinsics' must be one of"):
         CameraVariables(rig, "intrinsics")
-    with pytest.raises(ValueError, match=r"BodyFitConfig.cameras='intrinsics' must be one of \['fixed', 'ext', 'int_ext'\]"):
+    with pytest.raises(ValueError,
+                       match=r"BodyFitConfig.cameras='intrinsics' must be one of \['fixed', 'ext', 'int_ext'\]"):
         BodyFitConfig(cameras="intrinsics")
 
 
@@ -149,3 +150,31 @@ def test_the_levenberg_marquardt_bundle_reaches_the_exact_cameras_where_lbfgs_st
         BodyFitConfig(bundle_solver="newton")
     with pytest.raises(ValueError, match="the cameras must move"):
         bundle_adjust_on_joints(observations, start, config, regime="fixed")
+
+
+def test_the_camera_shift_is_the_mean_pixel_move_of_the_points_seen(scene_inputs):  # noqa: F811
+    from humancal.fitting.cameras import camera_shift_px
+
+    _, observations, rig = scene_inputs
+    cams = CameraVariables(rig, "int_ext")
+    before = cams.parameters().detach().clone()
+    points = torch.as_tensor(observations.joints_world_m[observations.joints_valid], dtype=torch.float64)
+    assert camera_shift_px(cams, before, points) == 0.0
+    with torch.no_grad():
+        cams.centre_m[0, 0] += 0.05  # view 0 five centimetres along x
+        cams.log_focal[1] += np.log(1.01)  # view 1's focal one per cent longer
+    old, _ = rig.project(points.numpy())
+    new, _ = cams.to_rig().project(points.numpy())
+    expected = np.nanmean(np.linalg.norm(new - old, axis=-1))
+    assert expected > 1.0 and np.isclose(camera_shift_px(cams, before, points), expected, rtol=1e-9)
+
+
+@pytest.mark.parametrize("stop_px, rounds_run", [(0.0, 3), (1e9, 1)])
+def test_the_rounds_end_once_a_round_barely_moves_the_cameras(body_model, scene_inputs, stop_px, rounds_run):  # noqa: F811
+    """``round_stop_px``: no further round after one whose cameras moved less (0: every round)."""
+    _, observations, rig = scene_inputs
+    config = FAST.replace(cameras="int_ext", rounds=3, bundle_start=False, iterations_3d=20, iterations_body=2,
+                          iterations_global=2, iterations_cameras=3, round_stop_px=stop_px)
+    fit = fit_bodies(body_model, observations, _perturbed(rig), shipped_prior()[0], config)
+    assert len(fit.round_shifts_px) == rounds_run
+    assert all(np.isfinite(fit.round_shifts_px)) and fit.round_shifts_px[0] > 0.0
