@@ -230,7 +230,7 @@ def solve_parts(flat: FlatFrames, labels: np.ndarray, start: np.ndarray, dual: n
     converged = np.ones(len(flat.frames), bool)
     with _blas_controller().limit(limits=1, user_api="blas"):
         # Many small matrices: one BLAS thread is fastest, and threads fight over busy cores.
-        for members in padded_buckets(labels, flat.view):
+        for members in _chunks(padded_buckets(labels, flat.view)):
             bucket = _Bucket.gather(members, flat, config.match_threshold)
             x, d, its, ok = _solve_bucket(bucket, start, dual, config)
             np.maximum.at(iterations, bucket.frame, its)
@@ -240,6 +240,21 @@ def solve_parts(flat: FlatFrames, labels: np.ndarray, start: np.ndarray, dual: n
             took = bucket.real & (rep >= 0)
             first[members[took]] = np.take_along_axis(members, np.maximum(rep, 0), axis=1)[took]
     return SolvedFrames(relaxed, dual_out, first, iterations, converged)
+
+
+MAX_BATCH_ENTRIES = 1 << 21
+"""Matrix entries (problems x m x m) solved in one batch. The solver keeps a few dozen arrays of that size (16 MB
+each in float64), so its memory stays bounded whatever the number of frames; the problems are independent (each
+has its own penalty and stops on its own), so solving them in chunks gives the same solutions."""
+
+
+def _chunks(buckets: list[np.ndarray]) -> list[np.ndarray]:
+    """Each bucket's (P, m) rows cut into chunks of at most :data:`MAX_BATCH_ENTRIES` / m^2 problems."""
+    out = []
+    for members in buckets:
+        step = max(1, MAX_BATCH_ENTRIES // members.shape[1] ** 2)
+        out += [members[start:start + step] for start in range(0, len(members), step)]
+    return out
 
 
 def _solve_bucket(bucket: _Bucket, start: np.ndarray, dual: np.ndarray, config: MatchingConfig

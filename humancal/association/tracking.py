@@ -4,7 +4,7 @@ section III-C, ``docs/association.md``).
 :func:`associate` runs the whole association of a sequence:
 
 1. **Affinity** of every cross-view pair of every frame (:func:`~humancal.association.affinity.pair_affinities`).
-2. **Matching**, all frames in one batch, without the temporal term
+2. **Matching**, all frames in one batch (or in chunks of frames: :data:`MAX_CHUNK_PAIRS`), without the temporal term
    (:func:`~humancal.association.cycle_matching.match_frames`): per frame, clusters of detections (one person,
    at most one detection per view) and unmatched detections.
 3. **Triangulation** of every cluster, all at once: the confidence-weighted DLT and per-joint outlier-view
@@ -162,25 +162,34 @@ def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: Came
     warnings = _check_inputs(detections, lifted, rig)
     seconds: dict[str, float] = {}
     order, dense, lifted_sorted = _sorted_by_frame(detections, lifted)
-    with _timed(seconds, "affinity"):
-        pairs = pair_affinities(dense, lifted_sorted, rig, config.affinity)
-        matrices = pairs.matrices()
-        views = [dense.view[pairs.frame_start[i]:pairs.frame_start[i + 1]] for i in range(len(pairs.frames))]
-    with _timed(seconds, "matching"):
-        matchings = match_frames(views, matrices, config.matching_config)
+    frames, first_rows = np.unique(dense.frame, return_index=True)
+    frame_start = np.append(first_rows, len(dense.frame)).astype(np.int64)
+    chunks = _FrameChunks(dense, lifted_sorted, rig, config, frame_start)
+    matchings = []
+    for chunk in range(len(chunks)):
+        with _timed(seconds, "affinity"):
+            _, matrices, views = chunks.affinities(chunk)
+        with _timed(seconds, "matching"):
+            matchings += match_frames(views, matrices, config.matching_config)
     with _timed(seconds, "triangulation"):
         inputs = TriangulationInputs.of(dense, rig)
-        clusters = triangulate_matchings(matchings, pairs.frame_start, pairs.frames, inputs, config)
+        clusters = triangulate_matchings(matchings, frame_start, frames, inputs, config)
     with _timed(seconds, "tracking"):
         person = _track(clusters, config, warnings)
     seconds["temporal"] = 0.0
     if config.temporal and config.affinity.uses_pose and lifted is not None:
+        changed = 0
         with _timed(seconds, "temporal"):
-            changed = _rematch_with_tracks(pairs, matrices, views, matchings, clusters.frame, person,
-                                           clusters.joints_world_m, config)
+            for chunk in reversed(range(len(chunks))):  # the last chunk's affinities are kept, the others again
+                pairs, matrices, views = chunks.affinities(chunk)
+                lo, hi = chunks.bounds[chunk]
+                part = matchings[lo:hi]
+                changed += _rematch_with_tracks(pairs, matrices, views, part, clusters.frame, person,
+                                                clusters.joints_world_m, config)
+                matchings[lo:hi] = part
         if changed:
             with _timed(seconds, "triangulation"):
-                clusters = triangulate_matchings(matchings, pairs.frame_start, pairs.frames, inputs, config)
+                clusters = triangulate_matchings(matchings, frame_start, frames, inputs, config)
             with _timed(seconds, "tracking"):
                 person = _track(clusters, config, warnings)
     seconds["smoothing"] = 0.0
@@ -196,6 +205,58 @@ def associate(detections: DenseDetections, lifted: LiftedPoses | None, rig: Came
         skeleton_frame=clusters.frame[rows], skeleton_person=person[rows], joints_world_m=joints[rows],
         joint_views=clusters.joint_views[rows], num_views=clusters.num_views[rows], num_people=num_people,
         stage_seconds=seconds, warnings=tuple(warnings))
+
+
+MAX_CHUNK_PAIRS = 1 << 20
+"""Detection pairs (the squared detection counts of the frames) whose affinities and matching matrices are held at
+once. The frames are scored and matched in chunks of consecutive frames of at most this many pairs (a frame with
+more is a chunk of its own), so the association's memory does not grow with the number of frames (the matching
+holds about 150 bytes per pair: a chunk of 1 M pairs about 150 MB). Every frame is matched on its own, so the
+chunks give the same association as one batch."""
+
+
+class _FrameChunks:
+    """The frame-sorted detections cut into chunks of consecutive frames (:data:`MAX_CHUNK_PAIRS`), and each
+    chunk's affinities (:func:`~humancal.association.affinity.pair_affinities`), computed when asked; the last
+    chunk's are kept, so a sequence of one chunk is scored once."""
+
+    def __init__(self, dense: DenseDetections, lifted: LiftedPoses | None, rig: CameraRig, config: TrackingConfig,
+                 frame_start: np.ndarray) -> None:
+        self.dense, self.lifted, self.rig, self.config, self.frame_start = dense, lifted, rig, config, frame_start
+        self.bounds = _chunk_bounds(np.diff(frame_start) ** 2, MAX_CHUNK_PAIRS)
+        self._kept: tuple[int, tuple] | None = None
+
+    def __len__(self) -> int:
+        return len(self.bounds)
+
+    def affinities(self, chunk: int) -> tuple:
+        """``(pairs, matrices, views)`` of the chunk's frames: the :class:`PairAffinities`, one matrix per frame
+        (no temporal term) and each frame's views."""
+        if self._kept is not None and self._kept[0] == chunk:
+            return self._kept[1]
+        lo, hi = self.bounds[chunk]
+        rows = np.arange(self.frame_start[lo], self.frame_start[hi])
+        d = self.dense
+        part = DenseDetections(d.frame[rows], d.view[rows], d.det_id[rows], d.keypoints_px[rows], d.scores[rows])
+        pairs = pair_affinities(part, None if self.lifted is None else self.lifted.subset(rows), self.rig,
+                                self.config.affinity)
+        views = [part.view[pairs.frame_start[i]:pairs.frame_start[i + 1]] for i in range(len(pairs.frames))]
+        self._kept = (chunk, (pairs, pairs.matrices(), views))
+        return self._kept[1]
+
+
+def _chunk_bounds(costs: np.ndarray, budget: int) -> list[tuple[int, int]]:
+    """``(first, end)`` index ranges of consecutive items whose ``costs`` add up to at most ``budget`` (an item
+    above it alone); every item in exactly one range."""
+    bounds, first, total = [], 0, 0
+    for i, cost in enumerate(costs.tolist()):
+        if i > first and total + cost > budget:
+            bounds.append((first, i))
+            first, total = i, 0
+        total += cost
+    if len(costs):
+        bounds.append((first, len(costs)))
+    return bounds
 
 
 @contextmanager

@@ -468,3 +468,26 @@ def test_a_lone_detection_joins_the_cluster_it_fits():
     assert run(body, 4, flipped=False) == ([0], 0)
     assert run(body + [0.6, 0.0, 0.0], 4, flipped=False) == ([], -1)  # someone else
     assert run(body, 2, flipped=False) == ([], -1)  # the cluster has a detection of that view already
+
+
+def test_frames_scored_and_matched_in_chunks_give_the_same_association(scene3, result3, monkeypatch):
+    """Memory bounded by chunks of frames (``MAX_CHUNK_PAIRS``) changes nothing: every frame is matched alone."""
+    import humancal.association.tracking as tracking
+
+    _, dense, lifted, rig, _ = scene3
+    per_frame = np.bincount(np.unique(dense.frame, return_inverse=True)[1]) ** 2
+    monkeypatch.setattr(tracking, "MAX_CHUNK_PAIRS", int(per_frame.max()) * 3)  # about three frames a chunk
+    chunked = associate(dense, lifted, rig)
+    assert len(tracking._chunk_bounds(per_frame, tracking.MAX_CHUNK_PAIRS)) >= len(per_frame) // 3
+    np.testing.assert_array_equal(chunked.person_id, result3.person_id)
+    np.testing.assert_array_equal(chunked.skeleton_frame, result3.skeleton_frame)
+    np.testing.assert_array_equal(chunked.joints_world_m, result3.joints_world_m)
+
+
+def test_chunk_bounds_cover_every_item_once_within_the_budget():
+    from humancal.association.tracking import _chunk_bounds
+
+    costs = np.array([3, 3, 3, 9, 1, 1, 12, 2])
+    bounds = _chunk_bounds(costs, 7)
+    assert bounds == [(0, 2), (2, 3), (3, 4), (4, 6), (6, 7), (7, 8)]
+    assert _chunk_bounds(costs[:0], 7) == []
