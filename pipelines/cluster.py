@@ -18,8 +18,10 @@ A cluster is configured by environment variables, so that ``humancal update`` (t
     ``postgresql://user:password@host:5432/humancal`` (:mod:`pipelines.instance`). Workers on other machines need
     it; workers on the coordinator's machine can share its SQLite instance.
 
-Every worker must see the same state dir (``HUMANCAL_STATE_DIR``: artifacts, the body model's cache, the trained
-weights) and the same checkout of humancal. See ``docs/cluster.md``.
+Every worker must see the same state dir (``HUMANCAL_STATE_DIR``: the artifacts with the trained weights, the user
+datasets file; a folder every machine mounts, or a store's URL such as ``s3://bucket/prefix``) and the same checkout
+of humancal. Each machine keeps its own body model's cache and Dagster home in its local dir
+(``HUMANCAL_LOCAL_DIR``; :mod:`humancal.settings`). See ``docs/cluster.md``.
 
 Each run a worker executes is rebuilt there from :func:`selection_job` (a reconstructable job: the module, the
 function and its arguments travel with the step), from the worker's own ``pipelines.definitions``.

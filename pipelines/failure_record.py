@@ -1,4 +1,5 @@
-"""The asset partitions whose computation failed, remembered between updates (``<state dir>/update_failures.json``).
+"""The asset partitions whose computation failed, remembered between updates (``<state dir>/update_failures.json``,
+on the shared state dir: an update run from another machine knows them too).
 
 A plain ``humancal update`` does not retry an asset partition that failed in an earlier update while nothing it is
 computed from changed since: not its code version, not the data versions of its inputs, not its sequence's entry
@@ -11,11 +12,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+
+from upath import UPath
+
+from humancal.storage import write_atomic
 
 __all__ = ["Failure", "FailureRecord", "attempt_fingerprint"]
 
@@ -57,22 +60,25 @@ def attempt_fingerprint(code_version: str | None, inputs: dict[str, str | None],
 
 
 class FailureRecord:
-    """The failed asset partitions stored in a JSON file (or only in memory when ``path`` is ``None``)."""
+    """The failed asset partitions stored in a JSON file, local or on a store (or only in memory when ``path`` is
+    ``None``)."""
 
-    def __init__(self, path: str | Path | None = None):
-        self.path = Path(path) if path is not None else None
+    def __init__(self, path: str | Path | UPath | None = None):
+        self.path = UPath(path) if path is not None else None
         self._entries: dict[str, Failure] = {}
         self._changed = False
-        if self.path is not None and self.path.is_file():
+        if self.path is not None:
             try:
                 raw = json.loads(self.path.read_text())
                 self._entries = {key: Failure(**value) for key, value in raw.items()}
+            except FileNotFoundError:
+                pass
             except (ValueError, TypeError, OSError):
                 self._entries, self._changed = {}, True  # unreadable: start afresh (failures are retried)
 
     @classmethod
-    def in_state_dir(cls, state_dir: str | Path) -> "FailureRecord":
-        return cls(Path(state_dir) / FILE_NAME)
+    def in_state_dir(cls, state_dir: str | Path | UPath) -> "FailureRecord":
+        return cls(UPath(state_dir) / FILE_NAME)
 
     def get(self, asset: str, partition: str | None) -> Failure | None:
         return self._entries.get(_key(asset, partition))
@@ -104,14 +110,7 @@ class FailureRecord:
             self.path.unlink(missing_ok=True)
         else:
             text = json.dumps({key: asdict(value) for key, value in sorted(self._entries.items())}, indent=1)
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
-            try:
-                with os.fdopen(fd, "w") as f:
-                    f.write(text)
-                os.replace(tmp, self.path)
-            except BaseException:
-                Path(tmp).unlink(missing_ok=True)
-                raise
+            write_atomic(self.path, text.encode())
         self._changed = False
 
 

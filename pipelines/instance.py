@@ -1,8 +1,10 @@
-"""The CLI's persistent Dagster instance, in ``<state dir>/dagster_home`` (telemetry off), shared by every command.
+"""The CLI's persistent Dagster instance, in ``<local dir>/dagster_home`` (telemetry off), shared by every command.
 
-Its history (runs, materializations, partitions) is kept in SQLite files in that folder, or on Postgres when
-``HUMANCAL_POSTGRES_URL`` is set (a cluster: :mod:`pipelines.cluster`). The ``dagster.yaml`` written there says
-which; a ``dagster.yaml`` edited by hand (one this module did not write) is left as it is.
+The local dir is the state dir unless that is on a store (:mod:`humancal.settings`). The history (runs,
+materializations, partitions) is kept in SQLite files in that folder, or on Postgres when ``HUMANCAL_POSTGRES_URL``
+is set (a cluster: :mod:`pipelines.cluster`). The ``dagster.yaml`` written there says which; a ``dagster.yaml``
+edited by hand (one this module did not write) is left as it is. A state dir on a store needs Postgres
+(:func:`dagster_home` says so): the history of shared artifacts must be shared too.
 
 Standard library only at import time (the parser of ``humancal --help`` imports this module).
 """
@@ -13,7 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["configure_instance_env", "dagster_home", "instance_config", "persistent_instance"]
+__all__ = ["StoreWithoutPostgres", "configure_instance_env", "dagster_home", "instance_config", "persistent_instance"]
 
 POSTGRES_ENV = "HUMANCAL_POSTGRES_URL"
 _LOCAL = "telemetry:\n  enabled: false\n"
@@ -26,11 +28,26 @@ def instance_config() -> str:
     return _POSTGRES if os.environ.get(POSTGRES_ENV, "").strip() else _LOCAL
 
 
-def dagster_home() -> Path:
-    """The persistent DAGSTER_HOME of this checkout, its ``dagster.yaml`` written by :func:`instance_config`."""
-    from humancal.settings import state_dir
+class StoreWithoutPostgres(ValueError):
+    """The state dir is on a store and the instance is not on Postgres."""
 
-    home = state_dir() / "dagster_home"
+
+def dagster_home() -> Path:
+    """The persistent DAGSTER_HOME of this machine, ``<local dir>/dagster_home``, its ``dagster.yaml`` written by
+    :func:`instance_config`.
+
+    Raises:
+        StoreWithoutPostgres: ``HUMANCAL_STATE_DIR`` is a store's URL and ``HUMANCAL_POSTGRES_URL`` is unset.
+    """
+    from humancal.settings import STATE_DIR_ENV, local_dir, state_url
+
+    url = state_url()
+    if url is not None and not os.environ.get(POSTGRES_ENV, "").strip():
+        raise StoreWithoutPostgres(
+            f"{STATE_DIR_ENV}={url} is on a store, so the Dagster instance must be shared too: set {POSTGRES_ENV}="
+            "postgresql://user:password@host:5432/database (a SQLite instance is one machine's files and cannot "
+            "live on a store; docs/cluster.md)")
+    home = local_dir() / "dagster_home"
     home.mkdir(parents=True, exist_ok=True)
     config = home / "dagster.yaml"
     wanted = instance_config()

@@ -1,4 +1,4 @@
-"""The capture inbox: drop a capture folder into ``<state dir>/inbox/`` and a sensor registers and calibrates it.
+"""The capture inbox: drop a capture folder into ``<local dir>/inbox/`` and a sensor registers and calibrates it.
 
 A drop is a folder ``<inbox>/<NAME>/`` holding the detections (one sub-folder of OpenPose JSON per view, or one
 COCO-style keypoint JSON file per view) and, written last, ``capture.yaml`` (``humancal.captures.folder.read_capture_folder``)::
@@ -12,7 +12,9 @@ On each tick the sensor looks at drops it has not seen in their present state (t
 each drop: ``capture.yaml``'s time and size, the number of files). A valid drop is written into the user datasets
 file as dataset ``NAME`` (sequence ``capture`` unless ``capture.yaml`` names one), its partition is added and a
 run of every per-sequence asset is requested for it. An invalid drop is logged with the reason (the file and
-field) and not looked at again until it changes. The inbox folder is ``$HUMANCAL_INBOX`` or ``<state dir>/inbox``.
+field) and not looked at again until it changes. The inbox folder is ``$HUMANCAL_INBOX`` or ``<local dir>/inbox``: a
+folder of the machine the sensor runs on (the local dir is the state dir unless that is on a store:
+:mod:`humancal.settings`).
 """
 
 from __future__ import annotations
@@ -32,11 +34,11 @@ INBOX_ENV = "HUMANCAL_INBOX"
 
 
 def inbox_dir() -> Path:
-    """``$HUMANCAL_INBOX`` or ``<state dir>/inbox``."""
-    from humancal.settings import state_dir
+    """``$HUMANCAL_INBOX`` or ``<local dir>/inbox``."""
+    from humancal.settings import local_dir
 
     configured = os.environ.get(INBOX_ENV)
-    return Path(configured).expanduser() if configured else state_dir() / "inbox"
+    return Path(configured).expanduser() if configured else local_dir() / "inbox"
 
 
 def _fingerprint(drop: Path) -> str:
@@ -84,7 +86,7 @@ def build_capture_inbox_sensor(
         asset_selection=dg.AssetSelection.groups("sequence"),
         minimum_interval_seconds=minimum_interval_seconds,
         default_status=dg.DefaultSensorStatus.RUNNING,
-        description="Registers capture folders dropped into the inbox (<state dir>/inbox) and calibrates them.",
+        description="Registers capture folders dropped into the inbox (<local dir>/inbox) and calibrates them.",
     )
     def capture_inbox(context: dg.SensorEvaluationContext) -> dg.SensorResult:
         from humancal.captures.folder import CAPTURE_FILE

@@ -2,10 +2,11 @@
 
 Deciding that nothing is missing or stale needs the Definitions (which import torch, anny and every asset module:
 about 4 s) and a staleness query per asset partition. After an update that found nothing to do, the command
-stores what it printed beside a *fingerprint* of everything its answer depends on
-(``<state dir>/update_stamp.json``). The next identical command computes the fingerprint again (file sizes and
-modification times only: a few milliseconds, no Dagster, no torch) and, when it is unchanged, prints the stored
-lines and exits with the stored status. Anything else takes the full path.
+stores what it printed beside a *fingerprint* of everything its answer depends on (``<local dir>/update_stamp.json``;
+the local dir is the state dir unless that is on a store: :mod:`humancal.settings`). The next identical command
+computes the fingerprint again (file sizes and modification times only: a few milliseconds, no Dagster, no torch)
+and, when it is unchanged, prints the stored lines and exits with the stored status. Anything else takes the full
+path.
 
 The fingerprint covers:
 
@@ -13,12 +14,13 @@ The fingerprint covers:
 * the source and data files of the packages (``humancal``, ``assets``, ``resources``, ``pipelines``,
   ``evaluation``): code versions, shipped weights, the packaged datasets config and the paper's numbers live there;
   the interpreter's version and its site-packages folders (an installed or removed package changes them);
-* the settings: ``HUMANCAL_DATA_DIR``, ``HUMANCAL_DATASETS``, ``HUMANCAL_STATE_DIR``, ``HUMANCAL_CELERY_BROKER``,
-  the folders at the top of the data root (which sequences can be registered), the datasets config files and the
-  user datasets file;
-* the Dagster instance's storage files under ``<state dir>/dagster_home`` (any run, materialization, check
+* the settings: ``HUMANCAL_DATA_DIR``, ``HUMANCAL_DATASETS``, ``HUMANCAL_STATE_DIR``, ``HUMANCAL_LOCAL_DIR``,
+  ``HUMANCAL_CELERY_BROKER``, the folders at the top of the data root (which sequences can be registered), the
+  datasets config files and the user datasets file;
+* the Dagster instance's storage files under ``<local dir>/dagster_home`` (any run, materialization, check
   evaluation or partition change writes them) and its ``dagster.yaml``; the shortcut is off when that file
-  configures another storage (a database server), whose changes leave no trace here;
+  configures another storage (a database server), whose changes leave no trace here, and when the state dir is
+  on a store (which needs such a server anyway);
 * every file under ``<state dir>/artifacts`` (a deleted, damaged or added artifact changes it), and the record of
   failed asset partitions.
 
@@ -39,7 +41,8 @@ __all__ = ["Output", "fingerprint", "replay", "store"]
 
 FILE_NAME = "update_stamp.json"
 PACKAGES = ("humancal", "assets", "resources", "pipelines", "evaluation")
-SETTINGS = ("HUMANCAL_DATA_DIR", "HUMANCAL_DATASETS", "HUMANCAL_STATE_DIR", "HUMANCAL_CELERY_BROKER")
+SETTINGS = ("HUMANCAL_DATA_DIR", "HUMANCAL_DATASETS", "HUMANCAL_STATE_DIR", "HUMANCAL_LOCAL_DIR",
+            "HUMANCAL_CELERY_BROKER")
 MAX_ENTRIES = 8
 DEFAULT_DAGSTER_YAML = "telemetry:\n  enabled: false\n"
 
@@ -91,9 +94,11 @@ def _stat(path: Path) -> str:
 def fingerprint(command: str) -> str | None:
     """The fingerprint of ``command`` in the present state (``None``: the shortcut does not apply here)."""
     from humancal.datasets.sequences import default_config_path, user_config_path
-    from humancal.settings import REPO_ROOT, data_root, state_dir
+    from humancal.settings import REPO_ROOT, data_root, local_dir, state_dir, state_url
 
-    home = state_dir() / "dagster_home"
+    if state_url() is not None:
+        return None  # a store: its changes leave no trace in this machine's files
+    home = local_dir() / "dagster_home"
     try:
         if (home / "dagster.yaml").read_text() != DEFAULT_DAGSTER_YAML:
             return None  # another storage may be configured: its changes leave no trace in these files
@@ -125,9 +130,9 @@ def _read(path: Path) -> dict:
 def replay(command: str, verbose: bool) -> int | None:
     """Print what ``command`` printed last time and return its exit status, when nothing changed since
     (``None``: something did, or no stamp; take the full path)."""
-    from humancal.settings import state_dir
+    from humancal.settings import local_dir
 
-    entry = _read(state_dir() / FILE_NAME).get(command)
+    entry = _read(local_dir() / FILE_NAME).get(command)
     if not entry:
         return None
     now = fingerprint(command)
@@ -146,11 +151,11 @@ def store(command: str, print_fingerprint: str | None, output: Output, status: i
     anything (``print_fingerprint``) still holds (nothing changed while it ran); says whether."""
     import time
 
-    from humancal.settings import state_dir
+    from humancal.settings import local_dir
 
     if print_fingerprint is None or fingerprint(command) != print_fingerprint:
         return False
-    path = state_dir() / FILE_NAME
+    path = local_dir() / FILE_NAME
     entries = _read(path)
     entries[command] = {"fingerprint": print_fingerprint, "lines": output.lines, "status": status,
                         "written": time.strftime("%Y-%m-%d %H:%M:%S")}

@@ -7,8 +7,10 @@ fsspec package installed)::
     <root>/<asset key path>.parquet                     unpartitioned tables
     <root>/<asset key path>.pt                          checkpoints
 
-Writes are atomic: the bytes go to a hidden temporary sibling first, which is renamed over the
-target only when complete, so a killed run never leaves a half-written artifact under the real name.
+Writes are atomic (:mod:`humancal.storage`): on a file system the bytes go to a hidden temporary sibling first,
+which is renamed over the target only when complete; on an object store (S3, GCS, Azure, memory) the object is
+written directly, since a store shows an object only once its upload is complete. Either way a killed run never
+leaves a half-written artifact under the real name.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ from __future__ import annotations
 import hashlib
 import io
 import os
-import uuid
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -28,6 +29,7 @@ import torch
 from upath import UPath
 
 from humancal.lifter import checkpoint_digest
+from humancal.storage import is_object_store, write_atomic
 from humancal.tables.schemas import SCHEMAS, check_values, table_to_pandas, to_arrow
 
 TABLE_METADATA_KEY = "humancal/table"
@@ -147,32 +149,19 @@ def _first_line(err: BaseException) -> str:
     return str(err).splitlines()[0] if str(err) else type(err).__name__
 
 
-def _write_chunks(f, payload: bytes, chunk_bytes: int = 1 << 22) -> None:
-    for start in range(0, len(payload), chunk_bytes):
-        f.write(payload[start : start + chunk_bytes])
-
-
 def _atomic_write(path: UPath, payload: bytes) -> None:
-    """Write ``payload`` to a hidden temporary sibling, then rename it over ``path``.
-
-    Leftover temporaries of an earlier killed write of the same artifact are removed first.
-    """
-    for stale in path.parent.glob(f".{path.name}.tmp-*") if path.parent.exists() else ():
-        stale.unlink(missing_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
+    """Write ``payload`` to ``path`` atomically (:func:`humancal.storage.write_atomic`: a temporary sibling renamed
+    over it on a file system, the object written directly on an object store)."""
     try:
-        with tmp.open("wb") as f:
-            _write_chunks(f, payload)
-        tmp.rename(path)
+        write_atomic(path, payload)
     except OSError as err:
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
-        raise ArtifactError(f"cannot write {path}: {err.strerror or err} (check the storage root and its permissions)") from None
+        raise ArtifactError(f"cannot write {path}: {err.strerror or err} (check the storage root and its "
+                            "permissions)") from None
 
 
 def _make_dir(path: UPath) -> None:
+    if is_object_store(path):
+        return  # no folders there (and s3fs's mkdir may create a missing bucket)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:

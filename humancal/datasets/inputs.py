@@ -92,7 +92,7 @@ def capture_footage(spec: SequenceSpec, view_names: list[str]) -> list | None:
     from humancal.sync.capture import DEFAULT_SYNC_FPS
     from humancal.viewing.footage import open_footage
 
-    config = CaptureConfig.from_options(spec.options, Path(spec.source).parent if spec.source else None)
+    config = CaptureConfig.from_options(spec.options, spec.base_dir)
     names = [view_name(p, v) for v, p in enumerate(config.views)]
     rates = dict(config.view_fps)
     offsets = dict(config.time_offsets_s)
@@ -191,9 +191,8 @@ def _load_capture(spec: SequenceSpec) -> SequenceInputs:
     ground-truth cameras) when given; no other ground truth."""
     from humancal.captures import CaptureConfig, load_capture
 
-    base = Path(spec.source).parent if spec.source else None
     try:
-        config = CaptureConfig.from_options(spec.options, base)
+        config = CaptureConfig.from_options(spec.options, spec.base_dir)
     except ValueError as err:
         raise ValueError(f"sequence {spec.key} ({spec.source}): {err}") from None
     capture = load_capture(config, spec.sequence)

@@ -27,14 +27,15 @@ is an error (never a silent override).
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
+from upath import UPath
 
 from humancal.settings import REPO_ROOT
+from humancal.storage import is_local, is_object_store, write_atomic
 
 __all__ = [
     "SequenceSpec",
@@ -69,7 +70,8 @@ class SequenceSpec:
         sequence: sequence name (second half).
         kind: loader kind, one of ``KINDS``.
         options: loader options from the config (e.g. ``preset``, ``seed`` for synthetic data).
-        source: the datasets file it comes from (relative paths of a capture are relative to its folder).
+        source: the datasets file it comes from (relative paths of a capture are relative to its folder:
+            :attr:`base_dir`).
     """
 
     dataset: str
@@ -88,6 +90,15 @@ class SequenceSpec:
         """Folder under the data root this sequence reads, or None when it needs no external data."""
         return _KIND_DATA_FOLDER.get(self.kind)
 
+    @property
+    def base_dir(self) -> Path | None:
+        """The folder a capture's relative paths are relative to: that of :attr:`source` when the file is on this
+        machine; ``None`` when there is no source, or it is on a store (no folder of this machine: a capture
+        registered there needs absolute paths, which ``humancal add`` and the inbox sensor write)."""
+        if self.source is None or not is_local(self.source):
+            return None
+        return Path(self.source).parent
+
 
 def default_config_path() -> Path:
     """``$HUMANCAL_DATASETS`` or the config shipped with the package."""
@@ -97,14 +108,14 @@ def default_config_path() -> Path:
     return REPO_ROOT / "pipelines" / "datasets.yaml"
 
 
-def user_config_path() -> Path:
-    """The user datasets file, ``<state dir>/datasets.yaml`` (it may not exist)."""
+def user_config_path() -> UPath:
+    """The user datasets file, ``<state dir>/datasets.yaml`` (it may not exist; on a store when the state dir is)."""
     from humancal.settings import state_dir
 
     return state_dir() / "datasets.yaml"
 
 
-def load_datasets_config(path: Path | None = None, user_path: Path | None = None) -> dict[str, SequenceSpec]:
+def load_datasets_config(path: Path | None = None, user_path: Path | UPath | None = None) -> dict[str, SequenceSpec]:
     """Parse the datasets config, merged with the user datasets file, into specs keyed by partition key.
 
     Args:
@@ -116,7 +127,7 @@ def load_datasets_config(path: Path | None = None, user_path: Path | None = None
             dataset is defined in both files; the message names the file and the field.
     """
     specs = _load_one(Path(path) if path is not None else default_config_path())
-    user = Path(user_path) if user_path is not None else user_config_path()
+    user = UPath(user_path) if user_path is not None else user_config_path()
     if user.is_file():
         main_datasets = {s.dataset: s.source for s in specs.values()}
         for key, spec in _load_one(user).items():
@@ -129,7 +140,7 @@ def load_datasets_config(path: Path | None = None, user_path: Path | None = None
     return specs
 
 
-def _read_raw(path: Path) -> dict:
+def _read_raw(path: Path | UPath) -> dict:
     try:
         raw = yaml.safe_load(path.read_text())
     except FileNotFoundError:
@@ -141,7 +152,7 @@ def _read_raw(path: Path) -> dict:
     return raw
 
 
-def _load_one(path: Path) -> dict[str, SequenceSpec]:
+def _load_one(path: Path | UPath) -> dict[str, SequenceSpec]:
     raw = _read_raw(path)
     specs: dict[str, SequenceSpec] = {}
     for dataset, body in raw["datasets"].items():
@@ -200,8 +211,8 @@ def parse_partition_key(key: str, specs: dict[str, SequenceSpec]) -> SequenceSpe
     return specs[key]
 
 
-def add_user_sequence(dataset: str, sequence: str, kind: str, options: dict[str, Any], user_path: Path | None = None,
-                      main_path: Path | None = None) -> SequenceSpec:
+def add_user_sequence(dataset: str, sequence: str, kind: str, options: dict[str, Any],
+                      user_path: Path | UPath | None = None, main_path: Path | None = None) -> SequenceSpec:
     """Add one sequence to the user datasets file (created when missing), atomically.
 
     Args:
@@ -218,7 +229,7 @@ def add_user_sequence(dataset: str, sequence: str, kind: str, options: dict[str,
         DatasetsConfigError: a bad name, the dataset is defined in the main config or with another kind, or the
             partition exists; the file is then left as it was.
     """
-    user = Path(user_path) if user_path is not None else user_config_path()
+    user = UPath(user_path) if user_path is not None else user_config_path()
     for what, name in (("dataset", dataset), ("sequence", sequence)):
         if not name or _SEPARATOR in name or not all(c.isalnum() or c in "-_" for c in name):
             raise DatasetsConfigError(
@@ -244,7 +255,7 @@ def add_user_sequence(dataset: str, sequence: str, kind: str, options: dict[str,
     return SequenceSpec(dataset, sequence, kind, dict(options), str(user))
 
 
-def remove_user_sequences(dataset: str, sequence: str | None = None, user_path: Path | None = None,
+def remove_user_sequences(dataset: str, sequence: str | None = None, user_path: Path | UPath | None = None,
                           main_path: Path | None = None) -> list[str]:
     """Remove a dataset (or one of its sequences) from the user datasets file, atomically.
 
@@ -261,7 +272,7 @@ def remove_user_sequences(dataset: str, sequence: str | None = None, user_path: 
         DatasetsConfigError: the dataset comes with the main config, or is not in the user datasets file (or has
             no such sequence); the file is then left as it was.
     """
-    user = Path(user_path) if user_path is not None else user_config_path()
+    user = UPath(user_path) if user_path is not None else user_config_path()
     main_file = Path(main_path) if main_path is not None else default_config_path()
     if any(s.dataset == dataset for s in _load_one(main_file).values()):
         raise DatasetsConfigError(f"dataset {dataset!r} comes with humancal ({main_file}); only the captures you "
@@ -286,16 +297,10 @@ def remove_user_sequences(dataset: str, sequence: str | None = None, user_path: 
     return [partition_key(dataset, name) for name in removed]
 
 
-def _write_user_file(user: Path, raw: dict) -> None:
-    """Write the user datasets file atomically (a temporary sibling renamed over it)."""
-    user.parent.mkdir(parents=True, exist_ok=True)
+def _write_user_file(user: UPath, raw: dict) -> None:
+    """Write the user datasets file atomically (:func:`humancal.storage.write_atomic`)."""
+    if not is_object_store(user):
+        user.parent.mkdir(parents=True, exist_ok=True)
     text = "# Users' own captures (humancal add, the inbox sensor); merged with the packaged datasets config.\n"
     text += yaml.safe_dump(raw, sort_keys=False)
-    fd, tmp = tempfile.mkstemp(prefix=f".{user.name}.", suffix=".tmp", dir=user.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, user)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_atomic(user, text.encode())

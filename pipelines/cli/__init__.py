@@ -18,8 +18,9 @@
     humancal worker                      a Celery worker for `update` on a cluster (docs/cluster.md)
     humancal -v COMMAND ...              (or COMMAND -v) also print what was left waiting and why
 
-All commands share one persistent Dagster instance in ``<state dir>/dagster_home`` (telemetry off),
-so materializations and lineage survive between commands and are visible in the UI.
+All commands share one persistent Dagster instance in ``<local dir>/dagster_home`` (telemetry off; the local dir is
+the state dir unless that is on a store: ``humancal/settings.py``), so materializations and lineage survive between
+commands and are visible in the UI.
 
 This module imports only the standard library: the parser (``humancal --help``, argument errors) answers in a
 fraction of a second, and each command imports what it needs (the commands live in ``pipelines/cli/<command>.py``).

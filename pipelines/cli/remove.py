@@ -6,8 +6,9 @@ In this order, so that an interrupted removal can be run again and finishes the 
    (``humancal.datasets.sequences.remove_user_sequences``): from then on no command registers its partitions again;
 2. its partitions ``NAME__SEQ`` leave the instance's dynamic partitions, and their materialization history is
    wiped (the Dagster UI no longer lists them);
-3. its artifacts ``<state dir>/artifacts/*/NAME__SEQ.*`` are deleted, and the fan-in tables that held its rows
-   (``benchmark_table``, ``stage_timings``), which the next ``humancal update`` computes again without it;
+3. its artifacts ``<state dir>/artifacts/*/NAME__SEQ.*`` are deleted (on a store too), and the fan-in tables that
+   held its rows (``benchmark_table``, ``stage_timings``), which the next ``humancal update`` computes again
+   without it;
 4. the failures remembered for its partitions are forgotten.
 
 Datasets that come with humancal (``synthetic``, ``shelf``, those of ``HUMANCAL_DATASETS``) are refused with a
@@ -18,7 +19,8 @@ left (an interrupted removal), those are cleaned up.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
+
+from upath import UPath
 
 __all__ = ["cmd_remove"]
 
@@ -52,7 +54,7 @@ def cmd_remove(args) -> int:
     return 0
 
 
-def _leftovers(state: Path, name: str, sequence: str | None) -> list[str]:
+def _leftovers(state: UPath, name: str, sequence: str | None) -> list[str]:
     """Partition keys of ``name`` still registered in the instance or with artifacts (an interrupted removal)."""
     from pipelines import cli
     from pipelines.partitions import SEQUENCES
@@ -85,7 +87,7 @@ def _forget_partitions(keys: list[str]) -> None:
     print(f"deleted partition(s) {', '.join(k for k in keys if k in registered) or 'none'} from the instance")
 
 
-def _delete_artifacts(root: Path, keys: list[str]) -> int:
+def _delete_artifacts(root: UPath, keys: list[str]) -> int:
     """Delete every artifact of ``keys`` (and leftover temporaries); the fan-in tables too when they held one."""
     if not root.is_dir():
         return 0

@@ -112,13 +112,13 @@ def _finish(result, out: Output, after) -> int:
 
 
 def _is_persistent(instance) -> bool:
-    """The instance of the state dir (not a test's in-memory one): only then does the shortcut apply."""
+    """The instance of the local dir (not a test's in-memory one): only then does the shortcut apply."""
     from pathlib import Path
 
-    from humancal.settings import state_dir
+    from humancal.settings import local_dir
 
     root = getattr(instance, "root_directory", None)
-    return root is not None and Path(root).resolve() == (state_dir() / "dagster_home").resolve()
+    return root is not None and Path(root).resolve() == (local_dir() / "dagster_home").resolve()
 
 
 def _run_config(verbose: bool) -> dict:

@@ -116,13 +116,14 @@ def test_killed_write_leaves_no_partial_file(tmp_path):
     script = textwrap.dedent(f"""
         import time
         from upath import UPath
+        import humancal.storage
         import resources.io_managers as io
 
         def slow_chunks(f, payload):
             for i in range(0, len(payload), 1024):
                 f.write(payload[i:i + 1024]); f.flush(); time.sleep(0.01)
 
-        io._write_chunks = slow_chunks
+        humancal.storage._write_chunks = slow_chunks
         io._atomic_write(UPath({str(target)!r}), b"x" * 200_000)
     """)
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=REPO)
