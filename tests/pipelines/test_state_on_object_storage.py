@@ -26,6 +26,8 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
+from tests.resources.test_io_managers import _error_text
+
 s3fs = pytest.importorskip("s3fs", reason="s3fs is not installed (pip install -e '.[cluster]')")
 pytest.importorskip("moto.server", reason="moto's server is not installed (pip install -e '.[dev]')")
 
@@ -272,12 +274,3 @@ def test_a_state_dir_on_a_store_needs_postgres(bucket, monkeypatch, capsys, tmp_
                        "instance must be shared too: set HUMANCAL_POSTGRES_URL=postgresql://user:password@host:5432/"
                        "database (a SQLite instance is one machine's files and cannot live on a store; "
                        "docs/cluster.md)")
-
-
-def _error_text(excinfo) -> str:
-    parts, err, seen = [], excinfo.value, set()
-    while err is not None and id(err) not in seen:
-        seen.add(id(err))
-        parts.append(str(err))
-        err = err.__cause__ or err.__context__
-    return " | ".join(parts)
