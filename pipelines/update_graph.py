@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Iterable
+from graphlib import TopologicalSorter
 
 import dagster as dg
 
@@ -35,6 +36,7 @@ class UpdateGraph:
             for parent in parents:
                 self.children[parent].append(key)
         self._steps: dict[dg.AssetKey, tuple[dg.AssetKey, ...]] = {}
+        self._upstream_first: list[dg.AssetKey] | None = None
 
     @staticmethod
     def _fan_in(spec: dg.AssetSpec) -> bool:
@@ -70,6 +72,13 @@ class UpdateGraph:
 
     def sorted_keys(self) -> list[dg.AssetKey]:
         return sorted(self.specs, key=lambda k: k.to_user_string())
+
+    def upstream_first(self) -> list[dg.AssetKey]:
+        """Every asset, each after all of its parents."""
+        if self._upstream_first is None:
+            order = TopologicalSorter({key: self.parents[key] for key in self.sorted_keys()})
+            self._upstream_first = list(order.static_order())
+        return self._upstream_first
 
 
 def closure(keys: Iterable[dg.AssetKey], edges: dict) -> set[dg.AssetKey]:

@@ -126,6 +126,27 @@ def test_missing_materializes_everything_upstream_first_then_nothing(instance, s
     assert stale_asset_partitions(toy_defs(storage), instance) == []
 
 
+def test_a_new_partition_goes_through_the_graph_in_one_run_after_its_shared_inputs(instance, storage):
+    rounds = []
+    first = update(toy_defs(storage), instance, on_round=lambda n, items: rounds.append(sorted(
+        (key.to_user_string(), pk or "") for key, pk in items)))
+    # the lifter is missing: what reads it waits a round; then each partition's missing chain runs whole
+    assert rounds == [sorted([("lifter", ""), *((n, p) for n, p in _all("raw_detections"))]),
+                      _all("extrinsics", "intrinsics", "metric_tables"), [("benchmark_table", "")]]
+    assert first.rounds == 3 and first.failed == ()
+
+
+def test_a_step_failing_in_the_middle_of_a_run_fails_alone(instance, storage):
+    result = update(toy_defs(storage, fail="intrinsics"), instance)
+    assert sorted((n, p) for n, p, _ in result.failed) == _all("intrinsics")  # not what Dagster skipped after it
+    assert not {"extrinsics", "metric_tables", "benchmark_table"} & {n for n, _ in result.materialized}
+    [(name, _, reason)] = result.waiting
+    assert name == "benchmark_table" and "intrinsics[toy__a] failed" in reason
+    fixed = update(toy_defs(storage), instance)
+    assert _names(fixed) == sorted([*_all("intrinsics", "extrinsics", "metric_tables"), ("benchmark_table", None)],
+                                   key=lambda item: (item[0], item[1] or ""))
+
+
 def test_code_change_with_new_output_recomputes_it_and_its_downstream(instance, storage):
     update(toy_defs(storage), instance)
     changed = toy_defs(storage, code={"extrinsics": "2"}, offset={"extrinsics": 1})
