@@ -24,6 +24,7 @@ external data, so a Dagster upgrade that moves these names fails there first.
 from __future__ import annotations
 
 import enum
+import hashlib
 from dataclasses import dataclass
 
 import dagster as dg
@@ -32,7 +33,9 @@ from dagster._core.definitions.data_version import (
     DATA_VERSION_IS_USER_PROVIDED_TAG,
     DATA_VERSION_TAG,
     CachingStaleStatusResolver,
+    StaleCauseCategory,
     StaleStatus,
+    get_input_data_version_tag,
 )
 from dagster._time import get_current_datetime
 
@@ -110,7 +113,38 @@ class StalenessView:
         if freshness is Freshness.FRESH:
             return Status(freshness)
         causes = self._resolver.get_stale_causes(key, partition)
-        return Status(freshness, _describe(causes[0]) if causes else "stale")
+        if not causes:
+            return Status(freshness, "stale")
+        causes = [cause for cause in causes if not self._consumed_current(key, partition, cause)]
+        return Status(freshness, _describe(causes[0])) if causes else Status(Freshness.FRESH)
+
+    def _consumed_current(self, key: dg.AssetKey, partition: str | None, cause) -> bool:
+        """Whether a "new dependency data version" cause of ``(key, partition)`` on one partition of a partitioned
+        input is wrong: the latest materialization of ``(key, partition)`` records, as the data version it read,
+        Dagster's hash of that input partition's current data version.
+
+        Dagster decides that cause by event ids, not data versions: the input counts as new when the input
+        partition has a materialization after the event the step recorded reading. The step takes that event from
+        the asset's latest materialization of any partition (``asset_keys.last_materialization``), which two
+        processes storing materializations of the same asset at once can leave pointing at the earlier of the two
+        (measured on the cluster, Postgres and two workers: ``associations[P]`` stored as event 3012, the asset's
+        latest left at 3011, another partition's). Every later fit of ``P`` then records 3011 and is "stale" again,
+        whatever it reads. The data versions settle it."""
+        dependency = cause.dependency
+        if cause.category is not StaleCauseCategory.DATA or dependency is None or dependency.partition_key is None:
+            return False
+        own = self._latest_tags(key, partition)
+        current = self._latest_tags(dependency.asset_key, dependency.partition_key).get(DATA_VERSION_TAG)
+        consumed = own.get(get_input_data_version_tag(dependency.asset_key))
+        # Dagster's data version of the partitions of an input read by a step: the SHA-256 of their data versions
+        # joined in partition order; here one partition
+        return current is not None and consumed == hashlib.sha256(current.encode()).hexdigest()
+
+    def _latest_tags(self, key: dg.AssetKey, partition: str | None) -> dict[str, str]:
+        records = self._instance.fetch_materializations(
+            dg.AssetRecordsFilter(asset_key=key, asset_partitions=[partition] if partition else None), limit=1
+        ).records
+        return dict(records[0].asset_materialization.tags or {}) if records else {}
 
     def recorded(self, key: dg.AssetKey, partition: str | None = None) -> Recorded | None:
         """The data version of the latest materialization (``None`` if never materialized)."""
