@@ -58,18 +58,27 @@ def test_io_manager_key_names_the_assets_own():
     assert io_manager_key(defs, dg.AssetKey("child")) == "other_io_manager"
 
 
-def _partitioned_defs() -> dg.Definitions:
+def _partitioned_defs(versions: dict[str, str] | None = None) -> dg.Definitions:
+    """``parent`` -> ``child`` over partitions a and b; ``parent``'s data version of a partition is ``versions``'s
+    entry (read when it runs), else ``v-<partition>``."""
     partitions = dg.StaticPartitionsDefinition(["a", "b"])
+    versions = {} if versions is None else versions
 
     @dg.asset(code_version="1", partitions_def=partitions)
     def parent(context: dg.AssetExecutionContext) -> dg.Output:
-        return dg.Output(pd.DataFrame({"x": [1]}), data_version=dg.DataVersion(f"v-{context.partition_key}"))
+        version = versions.get(context.partition_key, f"v-{context.partition_key}")
+        return dg.Output(pd.DataFrame({"x": [1]}), data_version=dg.DataVersion(version))
 
     @dg.asset(code_version="1", partitions_def=partitions)
     def child(parent: pd.DataFrame) -> pd.DataFrame:
         return parent
 
     return dg.Definitions(assets=[parent, child], resources={"io_manager": dg.FilesystemIOManager()})
+
+
+def _materialize(defs: dg.Definitions, instance, name: str, partition: str) -> None:
+    assert dg.materialize(list(defs.assets), instance=instance, partition_key=partition, resources=defs.resources,
+                          selection=dg.AssetSelection.assets(name)).success
 
 
 def _lose_the_latest_update(instance, key: dg.AssetKey, partition: str) -> None:
@@ -89,44 +98,26 @@ def _lose_the_latest_update(instance, key: dg.AssetKey, partition: str) -> None:
 def test_a_lost_update_of_the_latest_materialization_does_not_leave_a_fresh_partition_stale(tmp_path):
     instance = dg.DagsterInstance.local_temp(str(tmp_path))
     defs = _partitioned_defs()
-
-    def run(name: str, partition: str) -> None:
-        assert dg.materialize(list(defs.assets), instance=instance, partition_key=partition, resources=defs.resources,
-                              selection=dg.AssetSelection.assets(name)).success
-
-    run("parent", "a")
-    run("parent", "b")
+    _materialize(defs, instance, "parent", "a")
+    _materialize(defs, instance, "parent", "b")
     _lose_the_latest_update(instance, dg.AssetKey("parent"), "a")
-    run("child", "b")  # reads parent[b], but records parent[a]'s event as the one it read
+    _materialize(defs, instance, "child", "b")  # reads parent[b], but records parent[a]'s event as the one it read
     view = StalenessView(defs, instance)
-    resolver_says = view._resolver.get_status(dg.AssetKey("child"), "b")
-    assert resolver_says.value == "STALE"  # Dagster, by event ids
+    assert view._resolver.get_status(dg.AssetKey("child"), "b").value == "STALE"  # Dagster, by event ids
     assert view.status(dg.AssetKey("child"), "b").fresh  # by data versions: it read parent[b]'s current data
-    run("parent", "b")  # computed again, the same data version
+    _materialize(defs, instance, "parent", "b")  # computed again, the same data version
     assert StalenessView(defs, instance).status(dg.AssetKey("child"), "b").fresh
 
 
 @pytest.mark.filterwarnings("ignore::dagster.BetaWarning")
 def test_new_data_in_an_input_partition_still_makes_it_stale(tmp_path):
     instance = dg.DagsterInstance.local_temp(str(tmp_path))
-    partitions = dg.StaticPartitionsDefinition(["a", "b"])
-    value = {"b": 1}
-
-    @dg.asset(code_version="1", partitions_def=partitions)
-    def parent(context: dg.AssetExecutionContext) -> dg.Output:
-        return dg.Output(pd.DataFrame({"x": [1]}), data_version=dg.DataVersion(f"v{value.get(context.partition_key)}"))
-
-    @dg.asset(code_version="1", partitions_def=partitions)
-    def child(parent: pd.DataFrame) -> pd.DataFrame:
-        return parent
-
-    defs = dg.Definitions(assets=[parent, child], resources={"io_manager": dg.FilesystemIOManager()})
-    for name in ("parent", "child"):
-        assert dg.materialize([parent, child], instance=instance, partition_key="b", resources=defs.resources,
-                              selection=dg.AssetSelection.assets(name)).success
+    versions = {"b": "v1"}
+    defs = _partitioned_defs(versions)
+    _materialize(defs, instance, "parent", "b")
+    _materialize(defs, instance, "child", "b")
     _lose_the_latest_update(instance, dg.AssetKey("parent"), "b")
-    value["b"] = 2
-    assert dg.materialize([parent, child], instance=instance, partition_key="b", resources=defs.resources,
-                          selection=dg.AssetSelection.assets("parent")).success
+    versions["b"] = "v2"
+    _materialize(defs, instance, "parent", "b")
     status = StalenessView(defs, instance).status(dg.AssetKey("child"), "b")
     assert status.freshness is Freshness.STALE and status.cause == "has a new dependency data version: parent[b]"
