@@ -50,6 +50,7 @@ from __future__ import annotations
 import logging
 from collections import defaultdict
 from collections.abc import Callable, Iterable
+from contextlib import nullcontext
 
 import dagster as dg
 
@@ -59,6 +60,7 @@ from pipelines.failure_record import FailureRecord
 from pipelines.run_guard import run_tags
 from pipelines.staleness import Freshness
 from pipelines.update_graph import UpdateGraph
+from pipelines.update_progress import StoredWatcher
 from pipelines.update_result import UpdateResult, asset_name
 from pipelines.update_state import AssetPartition, Round, UpdateState
 
@@ -104,6 +106,7 @@ def update(
     before_run: Callable[[], None] | None = None,
     cluster: ClusterSettings | None = None,
     on_run_done: Callable[[str | None, bool, int, int], None] | None = None,
+    on_stored: Callable[[dg.AssetKey, str | None, float], None] | None = None,
 ) -> UpdateResult:
     """Materialize missing or stale asset partitions, upstream first, until nothing that can run is left.
 
@@ -127,6 +130,8 @@ def update(
             run at the same time (:mod:`pipelines.cluster`); default: one run after the other, in this process.
         on_run_done: called as each run of a round ends, with its partition, whether it succeeded, how many runs
             of the round have ended and how many it has.
+        on_stored: called as each asset partition of a round is stored, with its key, partition and the seconds
+            since the round began (:class:`pipelines.update_progress.StoredWatcher`, from a thread of its own).
 
     Raises:
         RuntimeError: something could still run after ``max_rounds`` rounds.
@@ -155,13 +160,15 @@ def update(
         if before_run is not None:
             before_run()
             before_run = None
-        if cluster is None:
-            for n, (pk, keys) in enumerate(steps.items(), start=1):
-                succeeded = _run(u, r, pk, keys, run_config, done)
-                if on_run_done:
-                    on_run_done(pk, succeeded, n, len(steps))
-        else:
-            _run_round_on_cluster(u, r, steps, run_config, done, cluster, on_run_done)
+        items = [(key, pk) for pk, keys in steps.items() for key in keys]
+        with StoredWatcher(instance, items, on_stored) if on_stored else nullcontext():
+            if cluster is None:
+                for n, (pk, keys) in enumerate(steps.items(), start=1):
+                    succeeded = _run(u, r, pk, keys, run_config, done)
+                    if on_run_done:
+                        on_run_done(pk, succeeded, n, len(steps))
+            else:
+                _run_round_on_cluster(u, r, steps, run_config, done, cluster, on_run_done)
         u.failures.save()
     left = [(k.to_user_string(), pk) for k, pk in u.scope() if not Round(u).status(k, pk).fresh]
     raise RuntimeError(f"still stale after {max_rounds} rounds: {left[:5]}")

@@ -84,7 +84,8 @@ def _update_and_report(out: Output, key: str, partitions: list[str] | None, afte
     def run():
         return update(defs, instance, partitions=partitions, exclude=exclude, on_round=_round_printer(out),
                       run_config=_run_config(out.verbose), failures=failures, before_run=init_warp_quietly,
-                      cluster=cluster, on_run_done=_run_printer(out) if cluster is not None else None)
+                      cluster=cluster, on_run_done=_run_printer(out) if cluster is not None else None,
+                      on_stored=_stored_printer(out) if cluster is None else None)
 
     result = run()
     out(f"materialized {result.count} asset partitions" + (f" in {time.perf_counter() - t0:.1f} s" if result.count else ""))
@@ -133,6 +134,14 @@ def _round_printer(out: Output):
         out(f"round {n}: {len(items)} stale or missing: {names}")
 
     return print_round
+
+
+def _stored_printer(out: Output):
+    def print_stored(key, partition, seconds) -> None:
+        name = f"{key.to_user_string()}[{partition}]" if partition else key.to_user_string()
+        out(f"  stored {name} ({seconds:.0f} s into the round)")
+
+    return print_stored
 
 
 def _run_printer(out: Output):

@@ -127,9 +127,11 @@ def test_missing_materializes_everything_upstream_first_then_nothing(instance, s
 
 
 def test_a_new_partition_goes_through_the_graph_in_one_run_after_its_shared_inputs(instance, storage):
-    rounds = []
+    rounds, stored = [], []
     first = update(toy_defs(storage), instance, on_round=lambda n, items: rounds.append(sorted(
-        (key.to_user_string(), pk or "") for key, pk in items)))
+        (key.to_user_string(), pk or "") for key, pk in items)),
+        on_stored=lambda key, pk, seconds: stored.append((key.to_user_string(), pk)))
+    assert sorted(stored, key=str) == sorted(first.materialized, key=str)  # each reported once, as it was stored
     # the lifter is missing: what reads it waits a round; then each partition's missing chain runs whole
     assert rounds == [sorted([("lifter", ""), *((n, p) for n, p in _all("raw_detections"))]),
                       _all("extrinsics", "intrinsics", "metric_tables"), [("benchmark_table", "")]]
