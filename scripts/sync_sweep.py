@@ -8,12 +8,18 @@ estimates each view's offset from the detections alone. Per scene: the views exa
 half a frame or more off but used (status ``ok``: silent errors), and the views refused (``ambiguous``, or
 ``unchecked``: one pair of views alone places it; :func:`humancal.sync.capture.synchronise_views` refuses both).
 
+``--with-cameras`` does what ``humancal add --unsynced`` does next: the views with an offset (``ok``, and
+``unchecked``) are put on one clock with the estimated offsets, calibrated from the people (intrinsics, extrinsics),
+and each offset is checked and moved with :func:`humancal.sync.check_offsets_with_cameras`; a view the cameras
+disagree with is counted as refused (``add`` stops on it), an ``unchecked`` one they confirm as used. Scenes with
+fewer than 3 such views are left as the estimate gave them.
+
 ``--seed S`` draws another set of scenes (scene ``i`` is seeded ``S * 100000 + i``; the default 0 gives the scenes
 ``docs/capture.md`` reports): tune on one seed, report on another.
 
 Resumable: one JSON line per scene in ``--out``; a rerun skips the scenes already there.
 
-    python scripts/sync_sweep.py --scenes 20 --seed 0 --out sync_sweep.jsonl [--lifter checkpoint.pt]
+    python scripts/sync_sweep.py --scenes 20 --seed 0 --out sync_sweep.jsonl [--lifter checkpoint.pt] [--with-cameras]
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 
-def run_scene(seed: int, body, lifter) -> dict:
+def run_scene(seed: int, body, lifter, with_cameras: bool = False) -> dict:
     from humancal.sync import estimate_time_offsets
     from humancal.synthetic import generate_scene, preset
     from humancal.synthetic.clocks import started_by_hand
@@ -47,14 +53,58 @@ def run_scene(seed: int, body, lifter) -> dict:
     start = time.perf_counter()
     estimate = estimate_time_offsets(detections, config.fps, lifter=lifter)
     seconds = time.perf_counter() - start
-    used = np.array([s == "ok" for s in estimate.status])[1:]
-    error = (estimate.offset_frames - truth)[1:]
+    row = {}
+    offsets, used = estimate.offset_frames, np.array([s == "ok" for s in estimate.status])
+    if with_cameras:
+        offsets, used, row = _checked_with_cameras(detections, estimate, config, scene.rig, lifter)
+    used = used[1:]
+    error = (offsets - truth)[1:]
     exact = used & (np.abs(error) < 0.5)
-    return {"seed": seed, "views": views, "people": people, "frames": frames, "behaviour": behaviour,
+    return row | {"seed": seed, "views": views, "people": people, "frames": frames, "behaviour": behaviour,
             "checked_views": views - 1, "exact": int(exact.sum()), "wrong_used": int((used & ~exact).sum()),
             "ambiguous": int((~used).sum()), "unchecked": estimate.status.count("unchecked"),
             "max_error_used_frames": float(np.abs(error[used]).max()) if used.any() else None,
             "seconds": round(seconds, 2)}
+
+
+def _checked_with_cameras(detections, estimate, config, rig, lifter) -> tuple[np.ndarray, np.ndarray, dict]:
+    """What ``humancal add --unsynced`` does after the estimate (``humancal.sync.capture.synchronise_views``): the
+    views with an offset (``ok`` or ``unchecked``) put on one clock, calibrated from the people, and each offset
+    checked and moved with :func:`humancal.sync.check_offsets_with_cameras`. Returns the offsets (reference frames;
+    NaN for a view the cameras disagree with), which views are used (``ok`` and not disagreeing, or ``unchecked``
+    and confirmed: the check agrees or moved it), and what the check did."""
+    from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
+    from humancal.lifter import lift_detections
+    from humancal.sync import apply_time_offsets, check_offsets_with_cameras
+    from humancal.tables.detections import detections_to_dense
+
+    start = time.perf_counter()
+    status = np.array(estimate.status)
+    placed = [v for v, s in enumerate(status) if s in ("ok", "unchecked")]
+    offsets = estimate.offset_frames.copy()
+    used = status == "ok"
+    if len(placed) < 3:
+        return offsets, used, {"camera_check": "fewer than 3 views placed"}
+    kept = detections[detections["view"].isin(placed)].copy()
+    kept["view"] = kept["view"].map({v: i for i, v in enumerate(placed)})
+    synced = apply_time_offsets(kept, estimate.offset_s[placed], config.fps).detections
+    dense = detections_to_dense(synced)
+    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
+    sizes = [(rig[v].width_px, rig[v].height_px) for v in placed]
+    try:
+        intrinsics = estimate_intrinsics(dense, lifted, sizes, IntrinsicsConfig(missing_upright="defer"))
+        cameras = estimate_extrinsics(dense, lifted, intrinsics).cameras
+    except Exception as error:  # noqa: BLE001 - the sweep records why a scene could not be checked
+        return offsets, used, {"camera_check": f"{type(error).__name__}: {error}"}
+    check = check_offsets_with_cameras(dense, cameras)
+    verdict = np.array(check.status)
+    offsets[placed] = np.where(verdict == "disagrees", np.nan, offsets[placed] - check.shift_frames)
+    confirmed = np.isin(verdict, ("agrees", "moved"))
+    used[placed] = np.where(status[placed] == "ok", verdict != "disagrees", confirmed)
+    return offsets, used, {"camera_check": "ok", "check_shift": [int(k) for k in check.shift_frames],
+                           "check_status": list(check.status), "check_gain": [round(float(g), 3) for g in check.gain],
+                           "confirmed_unchecked": int((confirmed & (status[placed] == "unchecked")).sum()),
+                           "check_s": round(time.perf_counter() - start, 2)}
 
 
 def main() -> None:
@@ -64,6 +114,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("sync_sweep.jsonl"))
     parser.add_argument("--lifter", type=Path, default=None,
                         help="a lifter checkpoint (train_lifter.py --out) instead of the shipped weights")
+    parser.add_argument("--with-cameras", action="store_true",
+                        help="check the estimated offsets against cameras calibrated from the synchronised views")
     args = parser.parse_args()
     seeds = [args.seed * 100_000 + i for i in range(args.scenes)]
 
@@ -85,7 +137,7 @@ def main() -> None:
             checkpoint = (torch.load(args.lifter, map_location="cpu", weights_only=True) if args.lifter
                           else shipped_checkpoint())
             body, lifter = BodyModel(), load_lifter(checkpoint)
-        row = run_scene(seed, body, lifter)
+        row = run_scene(seed, body, lifter, args.with_cameras)
         done[seed] = row
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from humancal.association.detection_geometry import DetectionGeometry, detection_geometry
+from humancal.association.detection_geometry import DetectionGeometry, detection_geometry, ray_distances_m
 from humancal.camera import CameraRig
 from humancal.config import Config, at_least, in_range, positive
 from humancal.geometry.alignment import best_rotation_trace
@@ -50,9 +50,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-_MIN_SINE = 1e-2
-"""Rays closer than ~0.6 degrees to parallel: their line distance is ``|reciprocal| / 0.01`` (the reciprocal
-product itself is small there when the rays come from cameras in line with the point)."""
 _CHUNK_PAIRS = 16384
 """Pairs per vectorised block (bounds the memory of the (pairs, 23, 3) stacks; results do not depend on it)."""
 
@@ -140,12 +137,7 @@ def cross_view_pairs(frame: np.ndarray, view: np.ndarray) -> tuple[np.ndarray, n
 def _ray_similarity(geo: DetectionGeometry, a: np.ndarray, b: np.ndarray, scale_m: float,
                     min_common: int) -> tuple[np.ndarray, np.ndarray]:
     """(P,) confidence-weighted joint similarity of the rays of pairs (a, b), and (P,) common joint counts."""
-    da, db = geo.rays_world[a], geo.rays_world[b]
-    reciprocal = np.abs(np.einsum("pjk,pjk->pj", da, geo.moments_world_m[b])
-                        + np.einsum("pjk,pjk->pj", db, geo.moments_world_m[a]))
-    cos = np.einsum("pjk,pjk->pj", da, db)
-    sine = np.sqrt(np.maximum(1.0 - cos * cos, _MIN_SINE**2))
-    joint_sim = np.maximum(0.0, 1.0 - reciprocal / (sine * scale_m))
+    joint_sim = np.maximum(0.0, 1.0 - ray_distances_m(geo, a, b) / scale_m)
     w = np.sqrt(geo.scores[a] * geo.scores[b])
     common = (w > 0).sum(1)
     joint_sim = np.where(w > 0, joint_sim, 0.0)

@@ -16,7 +16,11 @@ from humancal.keypoints import NUM_JOINTS
 from humancal.lifter.lifted import LiftedPoses
 from humancal.tables.detections import DenseDetections
 
-__all__ = ["DetectionGeometry", "detection_geometry"]
+__all__ = ["DetectionGeometry", "detection_geometry", "ray_distances_m"]
+
+_MIN_SINE = 1e-2
+"""Rays closer than ~0.6 degrees to parallel: their line distance is ``|reciprocal| / 0.01`` (the reciprocal
+product itself is small there when the rays come from cameras in line with the point)."""
 
 
 @dataclass(frozen=True)
@@ -134,3 +138,18 @@ def detection_geometry(detections: DenseDetections, lifted: LiftedPoses | None, 
         root = np.einsum("dji,dj->di", R, t_cam - rig.t_cam_from_world_m[view])
     return DetectionGeometry(np.asarray(detections.frame, dtype=np.int64), view, scores, centres,
                              rays.astype(np.float32), moments.astype(np.float32), pose, root)
+
+
+def ray_distances_m(geo: DetectionGeometry, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(P, 23) distance between the rays of each joint of detections ``a`` and ``b`` (pairs of rows), metres.
+
+    In Plücker coordinates (unit direction ``d``, moment ``m = c x d``) two lines meet iff their reciprocal product
+    ``d_a . m_b + d_b . m_a`` is 0; divided by ``|d_a x d_b|`` (at least ``_MIN_SINE``) it is the distance between
+    the lines. NaN where either joint is absent.
+    """
+    da, db = geo.rays_world[a], geo.rays_world[b]
+    reciprocal = np.abs(np.einsum("pjk,pjk->pj", da, geo.moments_world_m[b])
+                        + np.einsum("pjk,pjk->pj", db, geo.moments_world_m[a]))
+    cos = np.einsum("pjk,pjk->pj", da, db)
+    sine = np.sqrt(np.maximum(1.0 - cos * cos, _MIN_SINE**2))
+    return reciprocal / sine

@@ -168,7 +168,8 @@ def load_capture(config: CaptureConfig, sequence: str, *, option_names: Mapping[
 
         detections, sync = synchronise_views(
             detections, view_names, fps=config.fps, view_fps=config.view_fps, unsynced=config.unsynced,
-            time_offsets_s=config.time_offsets_s, option_names=names)
+            time_offsets_s=config.time_offsets_s, option_names=names,
+            image_sizes_px=[tuple(sizes[v]) for v in range(len(config.views))])
     warnings += check_views(detections, view_names, names["views"])
     views = validate_table(pd.DataFrame({
         "sequence": sequence, "view": np.arange(V), "name": view_names,

@@ -18,6 +18,7 @@ from humancal.sync.offsets import (
     estimate_time_offsets,
     per_view_fps,
 )
+from humancal.sync.with_cameras import CameraCheck, CameraCheckConfig, check_offsets_with_cameras
 from humancal.sync.signals import SIGNAL_KINDS, TrackSignals, track_signals
 from humancal.sync.tracks import link_view_tracks
 
@@ -25,11 +26,14 @@ __all__ = [
     "STATUSES",
     "SIGNAL_KINDS",
     "AppliedOffsets",
+    "CameraCheck",
+    "CameraCheckConfig",
     "TrackSignals",
     "PairOffset",
     "SyncConfig",
     "TimeOffsets",
     "apply_time_offsets",
+    "check_offsets_with_cameras",
     "estimate_time_offsets",
     "link_view_tracks",
     "track_signals",

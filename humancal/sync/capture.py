@@ -12,6 +12,7 @@ import pandas as pd
 
 from humancal.sync.apply import apply_time_offsets
 from humancal.sync.offsets import SyncConfig, TimeOffsets, estimate_time_offsets
+from humancal.sync.with_cameras import CameraCheck, check_offsets_with_cameras
 
 __all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "synchronise_views"]
 
@@ -32,12 +33,15 @@ class CaptureSync:
         fps: (V,) frames per second of each view.
         offset_s: (V,) time offsets, seconds (view 0: 0).
         offset_frames: (V,) the same in reference frames.
-        status: (V,) ``"ok"`` (estimated and cross-checked) or ``"given"`` (an unchecked or ambiguous estimate is
-            refused, never stored).
+        status: (V,) ``"ok"`` (estimated and cross-checked: by a cycle of pairs of views, or by the cameras
+            calibrated from the people) or ``"given"`` (an unchecked or ambiguous estimate is refused, never stored).
         confidence: (V,) the estimate's margin (NaN where given).
         residual_frames: (V,) the largest sub-frame remainder rounded away, reference frames.
         dropped_frames: (V,) frames with detections dropped (outside view 0's frames, or merged).
         reference_fps: the reference clock's frames per second (view 0's, before any view was left out).
+        camera_check: (V,) what the check against cameras calibrated from the people did to each estimated offset
+            (:func:`humancal.sync.check_offsets_with_cameras`: ``"agrees"``, ``"moved +1 frame"``, ``"flat"``),
+            or why it did not run; empty where the offsets were given.
     """
 
     source: str
@@ -49,6 +53,7 @@ class CaptureSync:
     residual_frames: tuple[float, ...]
     dropped_frames: tuple[int, ...]
     reference_fps: float = DEFAULT_SYNC_FPS
+    camera_check: tuple[str, ...] = ()
 
     def pick(self, views: Sequence[int]) -> CaptureSync:
         """The same for the views ``views`` only (after some were left out)."""
@@ -57,13 +62,15 @@ class CaptureSync:
 
         return CaptureSync(self.source, sub(self.fps), sub(self.offset_s), sub(self.offset_frames), sub(self.status),
                            sub(self.confidence), sub(self.residual_frames), sub(self.dropped_frames),
-                           self.reference_fps)
+                           self.reference_fps, sub(self.camera_check) if self.camera_check else ())
 
     def view_text(self, v: int) -> str:
         """View ``v``'s offset in words, for the capture summary."""
         text = f"time offset {self.offset_s[v]:+.3f} s ({self.offset_frames[v]:+.2f} frames at {self.reference_fps:g} fps"
         if self.status[v] != "given":
             text += f", {self.status[v]}, confidence {self.confidence[v]:.2f}"
+            if self.camera_check:
+                text += f", cameras: {self.camera_check[v]}"
         text += ")"
         if self.fps[v] != self.reference_fps:
             text += f", {self.fps[v]:g} fps"
@@ -90,11 +97,15 @@ def _per_view(names: Sequence[str], default: float, named: Sequence[tuple[str, f
 def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: float | None,
                       view_fps: Sequence[tuple[str, float]], unsynced: bool,
                       time_offsets_s: Sequence[tuple[str, float]], option_names: Mapping[str, str],
-                      lifter_factory=None, config: SyncConfig = SyncConfig()) -> tuple[pd.DataFrame, CaptureSync]:
+                      lifter_factory=None, config: SyncConfig = SyncConfig(),
+                      image_sizes_px: Sequence[tuple[int, int]] | None = None) -> tuple[pd.DataFrame, CaptureSync]:
     """Move a capture's detections to view 0's frames.
 
     The offsets are ``time_offsets_s`` where given (``unsynced`` then says they were estimated by ``humancal add``),
-    else estimated (``unsynced``), else 0 (only the frame rates differ).
+    else estimated (``unsynced``), else 0 (only the frame rates differ). Estimated offsets are then checked against
+    cameras calibrated from the people on the synchronised detections when ``image_sizes_px`` is given
+    (:func:`check_offsets_with_cameras`): a view they put a whole frame or more off is moved there, a view whose
+    people they cannot place at any shift is refused.
 
     Args:
         detections: canonical ``detections`` table, each view on its own frames.
@@ -106,16 +117,19 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
         option_names: how messages name the options (keys ``fps``, ``view_fps``, ``unsynced``, ``time_offsets``).
         lifter_factory: returns the :class:`humancal.lifter.Lifter` the estimate uses (default: the shipped one).
         config: the search.
+        image_sizes_px: (V,) ``(width, height)`` of each view's images: estimated offsets are checked against
+            cameras calibrated from the people (None: not checked).
 
     Returns:
         ``(detections on view 0's frames, how)``.
 
     Raises:
-        ValueError: a name that is no view, or an estimated offset that is ambiguous or unchecked (the message
-            names the view and how to give its offset).
+        ValueError: a name that is no view, or an estimated offset that is ambiguous, unchecked or disagrees with
+            the calibrated cameras (the message names the view and how to give its offset).
     """
     rates = _per_view(names, DEFAULT_SYNC_FPS if fps is None else float(fps), view_fps, option_names["view_fps"])
     V = len(names)
+    camera_check: tuple[str, ...] = ()
     if time_offsets_s:
         offsets = _per_view(names, 0.0, time_offsets_s, option_names["time_offsets"])
         source = "estimated by humancal add" if unsynced else "given"
@@ -128,9 +142,21 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
             def lifter_factory():
                 return load_lifter(shipped_checkpoint())
 
-        estimate = estimate_time_offsets(detections, rates, lifter=lifter_factory(), config=config)
-        _refuse_unusable(estimate, names, option_names, config)
+        lifter = lifter_factory()
+        estimate = estimate_time_offsets(detections, rates, lifter=lifter, config=config)
+        unchecked = [v for v, s in enumerate(estimate.status) if s == "unchecked"]
+        # with cameras to check them, unchecked offsets get their chance: the cameras may confirm them
+        _refuse_unusable(estimate, names, option_names, config, [] if image_sizes_px is not None else unchecked)
         offsets, source, status, confidence = estimate.offset_s, "estimated", estimate.status, estimate.confidence
+        if image_sizes_px is not None:
+            offsets, camera_check = _checked_with_cameras(detections, offsets, rates, names, image_sizes_px, lifter,
+                                                          option_names)
+            confirmed = [v for v in unchecked if camera_check[v] == "agrees" or camera_check[v].startswith("moved")]
+            _refuse_unusable(estimate, names, option_names, config, sorted(set(unchecked) - set(confirmed)),
+                             cameras_tried=True)
+            status = tuple("ok" if v in confirmed else st for v, st in enumerate(status))
+            camera_check = tuple(f"{c} (confirms an offset one pair of views gave)" if v in confirmed else c
+                                 for v, c in enumerate(camera_check))
     else:
         offsets = np.zeros(V)
         source, status, confidence = "given", ("given",) * V, np.full(V, np.nan)
@@ -138,19 +164,71 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
     sync = CaptureSync(source, tuple(map(float, rates)), tuple(map(float, offsets)),
                        tuple(float(o * rates[0]) for o in offsets), tuple(status), tuple(map(float, confidence)),
                        tuple(map(float, applied.residual_frames)), tuple(map(int, applied.dropped_frames)),
-                       float(rates[0]))
+                       float(rates[0]), camera_check)
     for v, name in enumerate(names):
         log.info("view %d (%s): %s", v, name, sync.view_text(v))
     return applied.detections, sync
 
 
+def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray, names: Sequence[str],
+                          image_sizes_px: Sequence[tuple[int, int]], lifter, option_names: Mapping[str, str]
+                          ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The estimated offsets after :func:`check_offsets_with_cameras` on cameras calibrated from the people of the
+    synchronised detections, and what it did per view (the words of :attr:`CaptureSync.camera_check`).
+
+    Raises:
+        ValueError: a view the cameras disagree with (named, with how to give its offset).
+    """
+    from humancal.calibration import CalibrationError, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
+    from humancal.lifter import lift_detections
+    from humancal.tables.detections import detections_to_dense
+
+    V = len(names)
+    log.info("checking the time offsets against cameras calibrated from the people ...")
+    dense = detections_to_dense(apply_time_offsets(detections, offsets_s, rates).detections)
+    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
+    try:
+        intrinsics = estimate_intrinsics(dense, lifted, list(image_sizes_px), IntrinsicsConfig(missing_upright="defer"))
+        cameras = estimate_extrinsics(dense, lifted, intrinsics, view_names=list(names)).cameras
+    except CalibrationError as error:
+        log.warning("the time offsets were not checked against cameras: the calibration failed (%s)", error)
+        return offsets_s, (f"not checked ({type(error).__name__})",) * V
+    check = check_offsets_with_cameras(dense, cameras)
+    _refuse_disagreeing(check, offsets_s, names, option_names)
+    words = tuple(_check_words(check, v) for v in range(V))
+    return check.corrected_offsets_s(offsets_s, rates[0]), words
+
+
+def _check_words(check: CameraCheck, v: int) -> str:
+    if check.status[v] != "moved":
+        return check.status[v]
+    k = -int(check.shift_frames[v])
+    return f"moved {k:+d} frame{'s' if abs(k) > 1 else ''}"
+
+
+def _refuse_disagreeing(check: CameraCheck, offsets_s: np.ndarray, names: Sequence[str],
+                        option_names: Mapping[str, str]) -> None:
+    """Raise naming every view whose people the calibrated cameras cannot place at any shift searched."""
+    bad = [v for v, s in enumerate(check.status) if s == "disagrees"]
+    if not bad:
+        return
+    option = option_names["time_offsets"]
+    views = ", ".join(f"view {v} ({names[v]}, {offsets_s[v]:+.3f} s?)" for v in bad)
+    example = " ".join(f"{names[v]}=SECONDS" for v in bad)
+    raise ValueError(
+        f"{views}: the time offset estimated from the people's motion disagrees with the cameras calibrated from "
+        f"them: its people miss the other views' by {', '.join(f'{check.level_m[v]:.2f}' for v in bad)} m per view "
+        f"at every shift of up to {(check.cost_m.shape[1] - 1) // 2} frames (the others: "
+        f"{np.nanmedian(check.level_m):.2f} m). The motion matched a wrong moment. Give the offset you know ({option} "
+        f"{example}), or leave the view out")
+
+
 def _refuse_unusable(estimate: TimeOffsets, names: Sequence[str], option_names: Mapping[str, str],
-                     config: SyncConfig) -> None:
-    """Raise naming every view whose estimated offset is not cross-checked: ambiguous (no clear peak) or unchecked
-    (one pair of views alone places it, nothing confirms it: on the synthetic sweep such views were the ones used
-    one or more frames off)."""
-    ambiguous = estimate.ambiguous_views()
-    unchecked = [v for v, s in enumerate(estimate.status) if s == "unchecked"]
+                     config: SyncConfig, unchecked: Sequence[int], cameras_tried: bool = False) -> None:
+    """Raise naming every view whose estimated offset is not cross-checked: ambiguous (no clear peak) or, among
+    ``unchecked``, one pair of views alone places it and nothing confirms it (on the synthetic sweep such views were
+    the ones used one or more frames off); ``cameras_tried``: the calibrated cameras did not confirm them either."""
+    ambiguous = [] if cameras_tried else estimate.ambiguous_views()
     if not (ambiguous or unchecked):
         return
     option = option_names["time_offsets"]
@@ -167,7 +245,8 @@ def _refuse_unusable(estimate: TimeOffsets, names: Sequence[str], option_names: 
         views = ", ".join(f"view {v} ({names[v]}, {estimate.offset_s[v]:+.3f} s?)" for v in unchecked)
         example = " ".join(f"{names[v]}=SECONDS" for v in unchecked)
         parts.append(
-            f"{views}: the time offset rests on one pair of views only, no other pair confirms it, so it is not "
+            f"{views}: the time offset rests on one pair of views only, no other pair "
+            f"{'nor the cameras calibrated from the people ' if cameras_tried else ''}confirms it, so it is not "
             f"used. Check the offset shown (a clap, a flash, the files' timestamps) and give it ({option} "
             f"{example}), or film people moving where more cameras see them")
     raise ValueError(". ".join(parts))
