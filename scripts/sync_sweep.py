@@ -14,12 +14,17 @@ and each offset is checked and moved with :func:`humancal.sync.check_offsets_wit
 disagree with is counted as refused (``add`` stops on it), an ``unchecked`` one they confirm as used. Scenes with
 fewer than 3 such views are left as the estimate gave them.
 
+``--clocks consumer`` draws phone rigs instead (the ``phone`` preset: lens distortion, principal points off centre,
+portrait images), each view filming at 25, 30, 50 or 60 fps, started up to 2 s apart, for 5-15 s; offsets are then
+scored in view 0's frames.
+
 ``--seed S`` draws another set of scenes (scene ``i`` is seeded ``S * 100000 + i``; the default 0 gives the scenes
 ``docs/capture.md`` reports): tune on one seed, report on another.
 
 Resumable: one JSON line per scene in ``--out``; a rerun skips the scenes already there.
 
-    python scripts/sync_sweep.py --scenes 20 --seed 0 --out sync_sweep.jsonl [--lifter checkpoint.pt] [--with-cameras]
+    python scripts/sync_sweep.py --scenes 20 --seed 0 --out sync_sweep.jsonl [--lifter checkpoint.pt] [--with-cameras] \
+        [--clocks consumer]
 """
 
 from __future__ import annotations
@@ -33,8 +38,9 @@ import numpy as np
 import pandas as pd
 
 
-def run_scene(seed: int, body, lifter, with_cameras: bool = False) -> dict:
-    from humancal.sync import estimate_time_offsets
+def _studio_scene(seed: int, body):
+    """The default scenes: one frame rate (30 fps), cameras started up to 2 s apart; the scene, its detections on
+    each view's own frames, each view's frame rate and true offset (seconds), and the row's description."""
     from humancal.synthetic import generate_scene, preset
     from humancal.synthetic.clocks import started_by_hand
 
@@ -49,25 +55,57 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False) -> dict:
                     behaviour=behaviour)
     scene = generate_scene(config, body, sequence=f"sync_{seed}")
     detections = started_by_hand(scene.detections, starts, frames)
-    truth = starts - starts[0]
+    fps = np.full(views, config.fps)
+    return scene, detections, fps, (starts - starts[0]) / config.fps, {"views": views, "people": people,
+                                                                        "frames": frames, "behaviour": behaviour}
+
+
+def _consumer_scene(seed: int, body):
+    """``--clocks consumer``: phones (the ``phone`` preset: k1 up to 0.1, principal points up to 5 % off centre,
+    portrait two scenes in three) filming at 25, 30, 50 or 60 fps each, started up to 2 s apart, for 5-15 s;
+    as :func:`_studio_scene`."""
+    from humancal.synthetic import generate_scene, preset
+
+    rng = np.random.default_rng(seed)
+    views = int(rng.integers(5, 11))
+    people = int(rng.integers(2, 5))
+    frames = int(rng.integers(150, 451))
+    behaviour = str(rng.choice(["mixed", "mixed", "seated"]))
+    size = (1080, 1920) if rng.random() < 2 / 3 else (1920, 1080)
+    config = preset("phone", num_views=views, num_people=people, num_frames=frames, seed=1000 + seed,
+                    behaviour=behaviour, image_size_px=size, view_fps_choices=(25.0, 30.0, 50.0, 60.0))
+    scene = generate_scene(config, body, sequence=f"sync_{seed}")
+    clocks = scene.view_clocks
+    return scene, scene.detections, clocks["fps"].to_numpy(), clocks["time_offset_s"].to_numpy(), {
+        "views": views, "people": people, "frames": frames, "behaviour": behaviour,
+        "fps": "/".join(f"{f:g}" for f in clocks["fps"])}
+
+
+def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str = "studio") -> dict:
+    from humancal.sync import estimate_time_offsets
+
+    scene, detections, fps, truth_s, row = (_consumer_scene if clocks == "consumer" else _studio_scene)(seed, body)
+    truth = truth_s * fps[0]  # in reference frames (view 0's)
     start = time.perf_counter()
-    estimate = estimate_time_offsets(detections, config.fps, lifter=lifter)
+    estimate = estimate_time_offsets(detections, fps, lifter=lifter)
     seconds = time.perf_counter() - start
-    row = {}
     offsets, used = estimate.offset_frames, np.array([s == "ok" for s in estimate.status])
     if with_cameras:
-        offsets, used, row = _checked_with_cameras(detections, estimate, config, scene.rig, lifter)
+        offsets, used, checked = _checked_with_cameras(detections, estimate, scene.rig, lifter)
+        row |= checked
     used = used[1:]
     error = (offsets - truth)[1:]
     exact = used & (np.abs(error) < 0.5)
-    return row | {"seed": seed, "views": views, "people": people, "frames": frames, "behaviour": behaviour,
-            "checked_views": views - 1, "exact": int(exact.sum()), "wrong_used": int((used & ~exact).sum()),
-            "ambiguous": int((~used).sum()), "unchecked": estimate.status.count("unchecked"),
-            "max_error_used_frames": float(np.abs(error[used]).max()) if used.any() else None,
-            "seconds": round(seconds, 2)}
+    views = row["views"]
+    return row | {"seed": seed, "checked_views": views - 1, "exact": int(exact.sum()),
+                  "wrong_used": int((used & ~exact).sum()), "ambiguous": int((~used).sum()),
+                  "unchecked": estimate.status.count("unchecked"),
+                  "max_error_used_frames": float(np.abs(error[used]).max()) if used.any() else None,
+                  "errors_used_frames": [round(float(e), 3) for e in error[used]],
+                  "seconds": round(seconds, 2)}
 
 
-def _checked_with_cameras(detections, estimate, config, rig, lifter) -> tuple[np.ndarray, np.ndarray, dict]:
+def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray, np.ndarray, dict]:
     """What ``humancal add --unsynced`` does after the estimate (``humancal.sync.capture.synchronise_views``): the
     views with an offset (``ok`` or ``unchecked``) put on one clock, calibrated from the people, and each offset
     checked and moved with :func:`humancal.sync.check_offsets_with_cameras`. Returns the offsets (reference frames;
@@ -87,22 +125,27 @@ def _checked_with_cameras(detections, estimate, config, rig, lifter) -> tuple[np
         return offsets, used, {"camera_check": "fewer than 3 views placed"}
     kept = detections[detections["view"].isin(placed)].copy()
     kept["view"] = kept["view"].map({v: i for i, v in enumerate(placed)})
-    synced = apply_time_offsets(kept, estimate.offset_s[placed], config.fps).detections
+    synced = apply_time_offsets(kept, estimate.offset_s[placed], estimate.fps[placed]).detections
     dense = detections_to_dense(synced)
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     sizes = [(rig[v].width_px, rig[v].height_px) for v in placed]
     try:
         intrinsics = estimate_intrinsics(dense, lifted, sizes, IntrinsicsConfig(missing_upright="defer"))
-        cameras = estimate_extrinsics(dense, lifted, intrinsics).cameras
+        calibrated = estimate_extrinsics(dense, lifted, intrinsics)
     except Exception as error:  # noqa: BLE001 - the sweep records why a scene could not be checked
         return offsets, used, {"camera_check": f"{type(error).__name__}: {error}"}
-    check = check_offsets_with_cameras(dense, cameras)
+    cameras, per_view = calibrated.cameras, calibrated.diagnostics.per_view
+    check = check_offsets_with_cameras(dense, cameras, camera_verdicts=per_view["agreement"].tolist())
     verdict = np.array(check.status)
     offsets[placed] = np.where(verdict == "disagrees", np.nan, offsets[placed] - check.shift_frames)
     confirmed = np.isin(verdict, ("agrees", "moved"))
     used[placed] = np.where(status[placed] == "ok", verdict != "disagrees", confirmed)
     return offsets, used, {"camera_check": "ok", "check_shift": [int(k) for k in check.shift_frames],
                            "check_status": list(check.status), "check_gain": [round(float(g), 3) for g in check.gain],
+                           "check_level_m": [round(float(x), 4) for x in check.level_m],
+                           "calibration_agreement": per_view["agreement"].tolist(),
+                           "calibration_first_agreement": per_view["first_agreement"].tolist(),
+                           "bundle_status": per_view["bundle_status"].tolist(),
                            "confirmed_unchecked": int((confirmed & (status[placed] == "unchecked")).sum()),
                            "check_s": round(time.perf_counter() - start, 2)}
 
@@ -114,6 +157,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("sync_sweep.jsonl"))
     parser.add_argument("--lifter", type=Path, default=None,
                         help="a lifter checkpoint (train_lifter.py --out) instead of the shipped weights")
+    parser.add_argument("--clocks", choices=("studio", "consumer"), default="studio",
+                        help="studio: one frame rate, the scenes docs/capture.md reports; consumer: phones at "
+                             "25-60 fps filming 5-15 s")
     parser.add_argument("--with-cameras", action="store_true",
                         help="check the estimated offsets against cameras calibrated from the synchronised views")
     args = parser.parse_args()
@@ -137,7 +183,7 @@ def main() -> None:
             checkpoint = (torch.load(args.lifter, map_location="cpu", weights_only=True) if args.lifter
                           else shipped_checkpoint())
             body, lifter = BodyModel(), load_lifter(checkpoint)
-        row = run_scene(seed, body, lifter, args.with_cameras)
+        row = run_scene(seed, body, lifter, args.with_cameras, args.clocks)
         done[seed] = row
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")

@@ -189,11 +189,12 @@ def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     try:
         intrinsics = estimate_intrinsics(dense, lifted, list(image_sizes_px), IntrinsicsConfig(missing_upright="defer"))
-        cameras = estimate_extrinsics(dense, lifted, intrinsics, view_names=list(names)).cameras
+        calibrated = estimate_extrinsics(dense, lifted, intrinsics, view_names=list(names))
     except CalibrationError as error:
         log.warning("the time offsets were not checked against cameras: the calibration failed (%s)", error)
         return offsets_s, (f"not checked ({type(error).__name__})",) * V
-    check = check_offsets_with_cameras(dense, cameras)
+    check = check_offsets_with_cameras(dense, calibrated.cameras,
+                                       camera_verdicts=calibrated.diagnostics.per_view["agreement"].tolist())
     _refuse_disagreeing(check, offsets_s, names, option_names)
     words = tuple(_check_words(check, v) for v in range(V))
     return check.corrected_offsets_s(offsets_s, rates[0]), words
@@ -217,9 +218,10 @@ def _refuse_disagreeing(check: CameraCheck, offsets_s: np.ndarray, names: Sequen
     example = " ".join(f"{names[v]}=SECONDS" for v in bad)
     raise ValueError(
         f"{views}: the time offset estimated from the people's motion disagrees with the cameras calibrated from "
-        f"them: its people miss the other views' by {', '.join(f'{check.level_m[v]:.2f}' for v in bad)} m per view "
-        f"at every shift of up to {(check.cost_m.shape[1] - 1) // 2} frames (the others: "
-        f"{np.nanmedian(check.level_m):.2f} m). The motion matched a wrong moment. Give the offset you know ({option} "
+        f"them on that clock: the calibration judged the camera disagreeing with the others, or its people miss the "
+        f"other views' ({', '.join(f'{check.level_m[v]:.2f}' for v in bad)} m, the others "
+        f"{np.nanmedian(check.level_m):.2f} m) at every shift of up to {(check.cost_m.shape[1] - 1) // 2} frames. "
+        f"The motion matched a wrong moment (a walk repeats every second or so). Give the offsets you know ({option} "
         f"{example}), or leave the view out")
 
 

@@ -17,7 +17,7 @@ How (:func:`check_offsets_with_cameras`):
    confidence-weighted mean distance between corresponding rays, metres, over at least ``min_joints`` joints),
    the distance capped at ``cap_m`` (a person the other view does not see, or a wrong partner, costs the cap, not
    more); the pair's cost at ``d`` is the mean over the detections;
-3. the shifts ``s_v`` in ``-K .. K`` that minimise the sum of all pairs' costs at ``s_v - s_u``: each view in
+3. the shifts ``s_v`` in ``-K .. K`` that minimise the mean of all pairs' costs at ``s_v - s_u``: each view in
    turn takes its best shift, the others held, until none moves (as :func:`humancal.sync.offsets` places its fine
    stage), started from the views' own frames and from each view ``u``'s best shifts of the others against it
    alone; the start that ends lowest wins (one view at a time cannot move a group: on the synthetic sweep five of
@@ -30,7 +30,10 @@ How (:func:`check_offsets_with_cameras`):
    ``"disagrees"``: its rays miss the others' at every shift tried. On the synthetic sweep (``--seed 1`` of
    ``scripts/sync_sweep.py``) these were views placed tens of frames off by a consistent cycle of wrong correlation
    peaks (the calibration held their cameras), with levels 7-10 times the others' (0.15-0.20 m against 0.02 m);
-   no shift within the search mends them, and they must not be used.
+   no shift within the search mends them, and they must not be used. A view whose camera the calibration itself
+   says disagrees with the others (``camera_verdicts``) disagrees too: on phone rigs filming at mixed frame rates
+   (``scripts/sync_sweep.py --clocks consumer``) six of ten views were placed a gait cycle off together, the
+   calibration built itself around them and judged every camera disagreeing, while their levels looked fine.
 
 Convention: ``shift_frames[v] = k`` says the view's frame ``n + k`` (on the reference clock, as the detections
 were synchronised) shows the reference instant ``n``: its offset moves by ``-k`` reference frames
@@ -41,6 +44,7 @@ from __future__ import annotations
 
 import logging
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -93,7 +97,7 @@ class CameraCheck:
     Attributes:
         shift_frames: (V,) int: view ``v``'s frame ``n + k`` shows reference instant ``n`` (0: its offset agrees;
             view 0: 0).
-        cost_m: (V, 2K + 1) the view's summed pair costs at each shift ``-K .. K``, the others at their shifts,
+        cost_m: (V, 2K + 1) the view's mean pair cost at each shift ``-K .. K``, the others at their shifts,
             metres (NaN where no pair compares).
         level_m: (V,) the view's level at its shift: the median over its pairs of views of the median
             nearest-partner distance, metres (NaN: unchecked).
@@ -155,7 +159,8 @@ def _star(pair: np.ndarray, u: int, steps: np.ndarray) -> np.ndarray:
 
 
 def check_offsets_with_cameras(detections: DenseDetections, cameras: CameraRig,
-                               config: CameraCheckConfig = CameraCheckConfig()) -> CameraCheck:
+                               config: CameraCheckConfig = CameraCheckConfig(),
+                               camera_verdicts: Sequence[str] | None = None) -> CameraCheck:
     """Each view's whole-frame offset error, from cameras calibrated on the synchronised detections.
 
     Args:
@@ -163,6 +168,9 @@ def check_offsets_with_cameras(detections: DenseDetections, cameras: CameraRig,
             the lenses' images.
         cameras: the V cameras calibrated from them (any lens the rig has).
         config: the search.
+        camera_verdicts: (V,) the calibration's own verdict on each camera (``per_view["agreement"]`` of
+            :func:`humancal.calibration.estimate_extrinsics`); a camera it says ``"disagrees"`` cannot vouch for its
+            view's offset: the view ``"disagrees"`` here too (None: every camera trusted).
 
     Returns:
         The :class:`CameraCheck` (module docstring).
@@ -189,14 +197,18 @@ def check_offsets_with_cameras(detections: DenseDetections, cameras: CameraRig,
     steps = np.arange(-K, K + 1)
 
     def cost_of(s: np.ndarray, v: int) -> np.ndarray:
-        """(2K + 1,) view v's summed pair costs at each shift, the others at ``s``."""
+        """(2K + 1,) view v's mean pair cost at each shift, the others at ``s`` (a mean, not a sum: views of
+        different frame rates share no frame at some shifts, and a shift must not win by comparing fewer pairs)."""
         others = np.arange(V) != v
         c = pair[v, others][np.arange(V - 1), steps[:, None] - s[others] + 2 * K].T
-        return np.where(np.isfinite(c).any(0), np.nansum(c, axis=0), np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanmean(c, axis=0)
 
     def total(s: np.ndarray) -> float:
         v, u = np.triu_indices(V, 1)
-        return float(np.nansum(pair[v, u, s[v] - s[u] + 2 * K]))
+        c = pair[v, u, s[v] - s[u] + 2 * K]
+        return float(np.nanmean(c)) if np.isfinite(c).any() else np.inf
 
     def descend(s: np.ndarray) -> np.ndarray:
         for _ in range(config.max_rounds):
@@ -238,7 +250,8 @@ def check_offsets_with_cameras(detections: DenseDetections, cameras: CameraRig,
         if not np.isfinite(here):
             status.append("unchecked" if v else "agrees")
             continue
-        if level[v] > config.max_level_ratio * typical:
+        if level[v] > config.max_level_ratio * typical or (camera_verdicts is not None
+                                                            and camera_verdicts[v] == "disagrees"):
             status.append("disagrees")
             continue
         if shift[v]:

@@ -117,3 +117,10 @@ def test_offsets_one_pair_of_views_alone_gives_are_refused_without_cameras_to_ch
     assert len(shown) >= 1
     for view, seconds in shown.items():
         assert round(seconds * 30) == starts[view] - starts[0], (view, seconds)
+
+
+def test_a_camera_the_calibration_disagrees_with_cannot_vouch_for_its_offset(walking_scene):
+    dense = detections_to_dense(walking_scene.detections)
+    verdicts = ["ok", "ok", "disagrees", "ok", "ok", "unchecked"]
+    check = check_offsets_with_cameras(dense, walking_scene.rig, camera_verdicts=verdicts)
+    assert check.status == ("agrees", "agrees", "disagrees", "agrees", "agrees", "agrees"), check.status
