@@ -152,6 +152,9 @@ def cmd_add(args: argparse.Namespace) -> int:
     if key in load_datasets_config():  # the cheap check first; add_user_sequence checks again before writing
         raise DatasetsConfigError(f"partition {key} exists; choose another NAME or --sequence")
     flags = {**FLAGS, "views": "--openpose" if args.openpose else "--coco"}
+    if config.unsynced:
+        print("estimating the time offsets from the people's motion, then checking them with cameras calibrated "
+              "from the people (up to a few minutes) ...", flush=True)
     capture = load_capture(config, args.sequence, option_names=flags)
     sync = capture.summary.sync
     if config.unsynced and sync is not None:
