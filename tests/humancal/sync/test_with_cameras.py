@@ -124,3 +124,13 @@ def test_a_camera_the_calibration_disagrees_with_cannot_vouch_for_its_offset(wal
     verdicts = ["ok", "ok", "disagrees", "ok", "ok", "unchecked"]
     check = check_offsets_with_cameras(dense, walking_scene.rig, camera_verdicts=verdicts)
     assert check.status == ("agrees", "agrees", "disagrees", "agrees", "agrees", "agrees"), check.status
+
+
+def test_a_view_without_detections_is_unchecked_and_the_others_still_checked(walking_scene):
+    d = _late(walking_scene.detections, {2: 1})
+    dense = detections_to_dense(d[d["view"] != 4])
+    check = check_offsets_with_cameras(dense, walking_scene.rig)
+    assert check.status[4] == "unchecked" and np.isnan(check.level_m[4]), check.status
+    np.testing.assert_array_equal(check.shift_frames[[0, 1, 2, 3, 5]], [0, 0, 1, 0, 0])
+    empty = check_offsets_with_cameras(detections_to_dense(d.iloc[:0]), walking_scene.rig)
+    assert empty.status == ("agrees",) + ("unchecked",) * 5 and not empty.shift_frames.any()
