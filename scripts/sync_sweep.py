@@ -107,14 +107,11 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
 
 def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray, np.ndarray, dict]:
     """What ``humancal add --unsynced`` does after the estimate (``humancal.sync.capture.synchronise_views``): the
-    views with an offset (``ok`` or ``unchecked``) put on one clock, calibrated from the people, and each offset
-    checked and moved with :func:`humancal.sync.check_offsets_with_cameras`. Returns the offsets (reference frames;
+    views with an offset (``ok`` or ``unchecked``) put on one clock, calibrated from the people and each offset
+    checked and moved (:func:`humancal.sync.capture.calibrate_and_check`). Returns the offsets (reference frames;
     NaN for a view the cameras disagree with), which views are used (``ok`` and not disagreeing, or ``unchecked``
     and confirmed: the check agrees or moved it), and what the check did."""
-    from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
-    from humancal.lifter import lift_detections
-    from humancal.sync import apply_time_offsets, check_offsets_with_cameras
-    from humancal.tables.detections import detections_to_dense
+    from humancal.sync.capture import calibrate_and_check
 
     start = time.perf_counter()
     status = np.array(estimate.status)
@@ -125,17 +122,11 @@ def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray
         return offsets, used, {"camera_check": "fewer than 3 views placed"}
     kept = detections[detections["view"].isin(placed)].copy()
     kept["view"] = kept["view"].map({v: i for i, v in enumerate(placed)})
-    synced = apply_time_offsets(kept, estimate.offset_s[placed], estimate.fps[placed]).detections
-    dense = detections_to_dense(synced)
-    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     sizes = [(rig[v].width_px, rig[v].height_px) for v in placed]
     try:
-        intrinsics = estimate_intrinsics(dense, lifted, sizes, IntrinsicsConfig(missing_upright="defer"))
-        calibrated = estimate_extrinsics(dense, lifted, intrinsics)
+        check = calibrate_and_check(kept, estimate.offset_s[placed], estimate.fps[placed], sizes, lifter)
     except Exception as error:  # noqa: BLE001 - the sweep records why a scene could not be checked
         return offsets, used, {"camera_check": f"{type(error).__name__}: {error}"}
-    cameras, per_view = calibrated.cameras, calibrated.diagnostics.per_view
-    check = check_offsets_with_cameras(dense, cameras, camera_verdicts=per_view["agreement"].tolist())
     verdict = np.array(check.status)
     offsets[placed] = np.where(verdict == "disagrees", np.nan, offsets[placed] - check.shift_frames)
     confirmed = np.isin(verdict, ("agrees", "moved"))
@@ -143,9 +134,6 @@ def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray
     return offsets, used, {"camera_check": "ok", "check_shift": [int(k) for k in check.shift_frames],
                            "check_status": list(check.status), "check_gain": [round(float(g), 3) for g in check.gain],
                            "check_level_m": [round(float(x), 4) for x in check.level_m],
-                           "calibration_agreement": per_view["agreement"].tolist(),
-                           "calibration_first_agreement": per_view["first_agreement"].tolist(),
-                           "bundle_status": per_view["bundle_status"].tolist(),
                            "confirmed_unchecked": int((confirmed & (status[placed] == "unchecked")).sum()),
                            "check_s": round(time.perf_counter() - start, 2)}
 

@@ -14,7 +14,7 @@ from humancal.sync.apply import apply_time_offsets
 from humancal.sync.offsets import SyncConfig, TimeOffsets, estimate_time_offsets
 from humancal.sync.with_cameras import CameraCheck, check_offsets_with_cameras
 
-__all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "synchronise_views"]
+__all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "calibrate_and_check", "synchronise_views"]
 
 log = logging.getLogger(__name__)
 
@@ -170,33 +170,57 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
     return applied.detections, sync
 
 
+def calibrate_and_check(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray,
+                        image_sizes_px: Sequence[tuple[int, int]], lifter,
+                        view_names: Sequence[str] | None = None) -> CameraCheck:
+    """The views put on one clock with ``offsets_s``, their cameras calibrated from the people as the graph does
+    (:func:`humancal.calibration.estimate_intrinsics`, :func:`~humancal.calibration.estimate_extrinsics`), and each
+    offset checked with them (:func:`check_offsets_with_cameras`, a camera the calibration judges disagreeing
+    vouching for nothing).
+
+    Args:
+        detections: canonical ``detections`` table, each view on its own frames (views ``0 .. V-1``).
+        offsets_s: (V,) the offsets to check, seconds.
+        rates: (V,) frames per second of each view.
+        image_sizes_px: (V,) ``(width, height)`` of each view's images.
+        lifter: the :class:`humancal.lifter.Lifter` whose poses the calibration uses.
+        view_names: (V,) names for the calibration's messages.
+
+    Raises:
+        CalibrationError: the calibration failed.
+    """
+    from humancal.calibration import IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
+    from humancal.lifter import lift_detections
+    from humancal.tables.detections import detections_to_dense
+
+    dense = detections_to_dense(apply_time_offsets(detections, offsets_s, rates).detections)
+    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
+    intrinsics = estimate_intrinsics(dense, lifted, list(image_sizes_px), IntrinsicsConfig(missing_upright="defer"))
+    calibrated = estimate_extrinsics(dense, lifted, intrinsics,
+                                     view_names=None if view_names is None else list(view_names))
+    return check_offsets_with_cameras(dense, calibrated.cameras,
+                                      camera_verdicts=calibrated.diagnostics.per_view["agreement"].tolist())
+
+
 def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray, names: Sequence[str],
                           image_sizes_px: Sequence[tuple[int, int]], lifter, option_names: Mapping[str, str]
                           ) -> tuple[np.ndarray, tuple[str, ...]]:
-    """The estimated offsets after :func:`check_offsets_with_cameras` on cameras calibrated from the people of the
-    synchronised detections, and what it did per view (the words of :attr:`CaptureSync.camera_check`).
+    """The estimated offsets after :func:`calibrate_and_check`, and what it did per view (the words of
+    :attr:`CaptureSync.camera_check`).
 
     Raises:
         ValueError: a view the cameras disagree with (named, with how to give its offset).
     """
-    from humancal.calibration import CalibrationError, IntrinsicsConfig, estimate_extrinsics, estimate_intrinsics
-    from humancal.lifter import lift_detections
-    from humancal.tables.detections import detections_to_dense
+    from humancal.calibration import CalibrationError
 
-    V = len(names)
     log.info("checking the time offsets against cameras calibrated from the people ...")
-    dense = detections_to_dense(apply_time_offsets(detections, offsets_s, rates).detections)
-    lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     try:
-        intrinsics = estimate_intrinsics(dense, lifted, list(image_sizes_px), IntrinsicsConfig(missing_upright="defer"))
-        calibrated = estimate_extrinsics(dense, lifted, intrinsics, view_names=list(names))
+        check = calibrate_and_check(detections, offsets_s, rates, image_sizes_px, lifter, names)
     except CalibrationError as error:
         log.warning("the time offsets were not checked against cameras: the calibration failed (%s)", error)
-        return offsets_s, (f"not checked ({type(error).__name__})",) * V
-    check = check_offsets_with_cameras(dense, calibrated.cameras,
-                                       camera_verdicts=calibrated.diagnostics.per_view["agreement"].tolist())
+        return offsets_s, (f"not checked ({type(error).__name__})",) * len(names)
     _refuse_disagreeing(check, offsets_s, names, option_names)
-    words = tuple(_check_words(check, v) for v in range(V))
+    words = tuple(_check_words(check, v) for v in range(len(names)))
     return check.corrected_offsets_s(offsets_s, rates[0]), words
 
 
