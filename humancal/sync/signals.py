@@ -79,6 +79,8 @@ def pose_features(joints: np.ndarray, size: np.ndarray) -> np.ndarray:
         (D, 15) features, NaN where a joint they need is missing.
     """
     out = np.empty((len(joints), len(_ANGLES) + len(_DISTANCES)))
+    if joints.shape[-1] == 2:  # image keypoints: the angle between 2D directions is the one in their plane z = 0
+        joints = np.concatenate([joints, np.zeros(joints.shape[:-1] + (1,))], axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         for a, (vertex, p, q) in enumerate(_ANGLES):
             u = joints[:, _J[p]] - joints[:, _J[vertex]]

@@ -153,3 +153,16 @@ def test_tracks_follow_each_person_in_a_view(walking_scene):
               for t in np.unique(track[mine])]
     assert np.median(purity) == 1.0
     assert np.mean(purity) > 0.95
+
+
+def test_image_signal_without_a_lifter_finds_walking_offsets(walking_scene):
+    """``signal="2d"`` (no lifter) runs: joint angles of 2D keypoints are angles in the image plane. It places fewer
+    views than the lifted signal (``SyncConfig.signal``), and no closer (a view 2.2 frames off here, with offsets up to
+    60 frames); the cameras' check is what makes them exact (:mod:`humancal.sync.with_cameras`)."""
+    starts = np.array([20, 0, 45, 33, 7, 60, 12])
+    detections = started_by_hand(walking_scene.detections, starts, 291)
+    offsets = estimate_time_offsets(detections, 30.0, config=SyncConfig(signal="2d", fine_samples=0))
+    truth = starts - starts[0]
+    placed = np.array([s != "ambiguous" for s in offsets.status])
+    assert placed.sum() >= 3, offsets.status
+    assert np.abs(offsets.offset_frames[placed] - truth[placed]).max() < 3
