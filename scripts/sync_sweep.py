@@ -10,8 +10,9 @@ half a frame or more off but used (status ``ok``: silent errors), and the views 
 
 ``--with-cameras`` does what ``humancal add --unsynced`` does next: the views with an offset (``ok``, and
 ``unchecked``) are put on one clock with the estimated offsets, calibrated from the people (intrinsics, extrinsics),
-and each offset is checked and moved with :func:`humancal.sync.check_offsets_with_cameras`; a view the cameras
-disagree with is counted as refused (``add`` stops on it), an ``unchecked`` one they confirm as used. Scenes with
+and each offset is checked and moved (whole frames and the fraction) with
+:func:`humancal.sync.check_offsets_with_cameras`; a view the cameras disagree with, or are unsure of, is counted as
+refused (``add`` stops on it), an ``unchecked`` one they confirm as used. Scenes with
 fewer than 3 such views are left as the estimate gave them.
 
 ``--clocks consumer`` draws phone rigs instead (the ``phone`` preset: lens distortion, principal points off centre,
@@ -102,6 +103,8 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
                   "unchecked": estimate.status.count("unchecked"),
                   "max_error_used_frames": float(np.abs(error[used]).max()) if used.any() else None,
                   "errors_used_frames": [round(float(e), 3) for e in error[used]],
+                  "view_errors_frames": [round(float(e), 3) if np.isfinite(e) else None for e in offsets - truth],
+                  "view_used": [True] + [bool(u) for u in used],
                   "seconds": round(seconds, 2)}
 
 
@@ -109,8 +112,8 @@ def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray
     """What ``humancal add --unsynced`` does after the estimate (``humancal.sync.capture.synchronise_views``): the
     views with an offset (``ok`` or ``unchecked``) put on one clock, calibrated from the people and each offset
     checked and moved (:func:`humancal.sync.capture.calibrate_and_check`). Returns the offsets (reference frames;
-    NaN for a view the cameras disagree with), which views are used (``ok`` and not disagreeing, or ``unchecked``
-    and confirmed: the check agrees or moved it), and what the check did."""
+    NaN for a view the cameras disagree with), which views are used (``ok`` and neither disagreeing nor unsure, or
+    ``unchecked`` and confirmed: the check agrees or moved it), and what the check did."""
     from humancal.sync.capture import calibrate_and_check
 
     start = time.perf_counter()
@@ -128,10 +131,14 @@ def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray
     except Exception as error:  # noqa: BLE001 - the sweep records why a scene could not be checked
         return offsets, used, {"camera_check": f"{type(error).__name__}: {error}"}
     verdict = np.array(check.status)
-    offsets[placed] = np.where(verdict == "disagrees", np.nan, offsets[placed] - check.shift_frames)
+    refused = np.isin(verdict, ("disagrees", "unsure"))
+    offsets[placed] = np.where(verdict == "disagrees", np.nan, offsets[placed] - check.shift)
     confirmed = np.isin(verdict, ("agrees", "moved"))
-    used[placed] = np.where(status[placed] == "ok", verdict != "disagrees", confirmed)
-    return offsets, used, {"camera_check": "ok", "check_shift": [int(k) for k in check.shift_frames],
+    used[placed] = np.where(status[placed] == "ok", ~refused, confirmed)
+    return offsets, used, {"camera_check": "ok", "check_views": placed,
+                           "check_shift": [int(k) for k in check.shift_frames],
+                           "check_sub_frame": [round(float(f), 3) for f in check.sub_frame],
+                           "check_spread_frames": [round(float(f), 3) for f in check.spread_frames],
                            "check_status": list(check.status), "check_gain": [round(float(g), 3) for g in check.gain],
                            "check_level_m": [round(float(x), 4) for x in check.level_m],
                            "confirmed_unchecked": int((confirmed & (status[placed] == "unchecked")).sum()),

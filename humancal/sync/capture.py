@@ -40,7 +40,8 @@ class CaptureSync:
         dropped_frames: (V,) frames with detections dropped (outside view 0's frames, or merged).
         reference_fps: the reference clock's frames per second (view 0's, before any view was left out).
         camera_check: (V,) what the check against cameras calibrated from the people did to each estimated offset
-            (:func:`humancal.sync.check_offsets_with_cameras`: ``"agrees"``, ``"moved +1 frame"``, ``"flat"``),
+            (:func:`humancal.sync.check_offsets_with_cameras`: ``"agrees"``, ``"agrees (+0.21 frame)"``,
+            ``"moved +1.30 frames"``, ``"flat"``),
             or why it did not run; empty where the offsets were given.
     """
 
@@ -151,7 +152,7 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
         if image_sizes_px is not None:
             offsets, camera_check = _checked_with_cameras(detections, offsets, rates, names, image_sizes_px, lifter,
                                                           option_names)
-            confirmed = [v for v in unchecked if camera_check[v] == "agrees" or camera_check[v].startswith("moved")]
+            confirmed = [v for v in unchecked if camera_check[v].startswith(("agrees", "moved"))]
             _refuse_unusable(estimate, names, option_names, config, sorted(set(unchecked) - set(confirmed)),
                              cameras_tried=True)
             status = tuple("ok" if v in confirmed else st for v, st in enumerate(status))
@@ -219,34 +220,50 @@ def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates
     except CalibrationError as error:
         log.warning("the time offsets were not checked against cameras: the calibration failed (%s)", error)
         return offsets_s, (f"not checked ({type(error).__name__})",) * len(names)
-    _refuse_disagreeing(check, offsets_s, names, option_names)
+    _refuse_disagreeing(check, offsets_s, names, option_names, float(rates[0]))
     words = tuple(_check_words(check, v) for v in range(len(names)))
     return check.corrected_offsets_s(offsets_s, rates[0]), words
 
 
 def _check_words(check: CameraCheck, v: int) -> str:
-    if check.status[v] != "moved":
-        return check.status[v]
-    k = -int(check.shift_frames[v])
-    return f"moved {k:+d} frame{'s' if abs(k) > 1 else ''}"
+    move = -float(check.shift[v])
+    if check.status[v] == "moved":
+        return f"moved {move:+.2f} frames"
+    return check.status[v] + (f" ({move:+.2f} frame)" if round(move, 2) else "")
 
 
 def _refuse_disagreeing(check: CameraCheck, offsets_s: np.ndarray, names: Sequence[str],
-                        option_names: Mapping[str, str]) -> None:
-    """Raise naming every view whose people the calibrated cameras cannot place at any shift searched."""
+                        option_names: Mapping[str, str], reference_fps: float) -> None:
+    """Raise naming every view whose people the calibrated cameras cannot place at any shift searched, and every
+    view the two halves of the capture place apart (``"unsure"``)."""
     bad = [v for v, s in enumerate(check.status) if s == "disagrees"]
-    if not bad:
+    unsure = [v for v, s in enumerate(check.status) if s == "unsure"]
+    if not (bad or unsure):
         return
     option = option_names["time_offsets"]
-    views = ", ".join(f"view {v} ({names[v]}, {offsets_s[v]:+.3f} s?)" for v in bad)
-    example = " ".join(f"{names[v]}=SECONDS" for v in bad)
-    raise ValueError(
-        f"{views}: the time offset estimated from the people's motion disagrees with the cameras calibrated from "
-        f"them on that clock: the calibration judged the camera disagreeing with the others, or its people miss the "
-        f"other views' ({', '.join(f'{check.level_m[v]:.2f}' for v in bad)} m, the others "
-        f"{np.nanmedian(check.level_m):.2f} m) at every shift of up to {(check.cost_m.shape[1] - 1) // 2} frames. "
-        f"The motion matched a wrong moment (a walk repeats every second or so). Give the offsets you know ({option} "
-        f"{example}), or leave the view out")
+    parts = []
+    if bad:
+        views = ", ".join(f"view {v} ({names[v]}, {offsets_s[v]:+.3f} s?)" for v in bad)
+        example = " ".join(f"{names[v]}=SECONDS" for v in bad)
+        parts.append(
+            f"{views}: the time offset estimated from the people's motion disagrees with the cameras calibrated from "
+            f"them on that clock: the calibration judged the camera disagreeing with the others, or its people miss "
+            f"the other views' ({', '.join(f'{check.level_m[v]:.2f}' for v in bad)} m, the others "
+            f"{np.nanmedian(check.level_m):.2f} m) at every shift of up to {(check.cost_m.shape[1] - 1) // 2} "
+            f"frames. The motion matched a wrong moment (a walk repeats every second or so). Give the offsets you "
+            f"know ({option} {example}), or leave the view out")
+    if unsure:
+        corrected = check.corrected_offsets_s(offsets_s, reference_fps)
+        views = ", ".join(f"view {v} ({names[v]}, {corrected[v]:+.3f} s?)" for v in unsure)
+        example = " ".join(f"{names[v]}=SECONDS" for v in unsure)
+        apart = ", ".join("not compared in one half" if not np.isfinite(check.spread_frames[v])
+                          else f"{check.spread_frames[v]:.1f}" for v in unsure)
+        parts.append(
+            f"{views}: the cameras calibrated from the people cannot fix the time offset to the frame: the first "
+            f"and the second half of the capture place the view {apart} frames apart (people who move slowly, "
+            f"like seated people). Give the offsets you know ({option} {example}: a clap, a flash, the files' "
+            f"timestamps), or film people walking where the cameras see them")
+    raise ValueError(". ".join(parts))
 
 
 def _refuse_unusable(estimate: TimeOffsets, names: Sequence[str], option_names: Mapping[str, str],

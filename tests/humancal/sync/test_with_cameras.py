@@ -37,7 +37,8 @@ def test_views_a_frame_or_two_off_are_moved_back(walking_scene):
     assert (check.gain[[2, 4]] > CameraCheckConfig().min_gain).all()
     # the offsets the detections were synchronised with, corrected: view v's frame n is at reference n + offset
     corrected = check.corrected_offsets_s(np.zeros(6), 30.0) * 30.0
-    np.testing.assert_allclose(corrected, [0, 0, -1, 0, 2, 0])
+    np.testing.assert_allclose(corrected, [0, 0, -1, 0, 2, 0], atol=0.1)  # and no fraction of a frame to speak of
+    assert np.abs(check.sub_frame).max() < 0.1
 
 
 def test_the_reference_view_off_moves_the_others_relative_to_it(walking_scene):
@@ -87,9 +88,9 @@ def test_synchronise_views_checks_its_estimate_with_cameras(body_model):
                                 option_names={"view_fps": "--fps", "time_offsets": "--time-offsets"},
                                 lifter_factory=lambda: lifter,
                                 image_sizes_px=[(c.width_px, c.height_px) for c in scene.rig])
-    np.testing.assert_allclose(sync.offset_frames, starts - starts[0], atol=1e-6)
+    np.testing.assert_allclose(sync.offset_frames, starts - starts[0], atol=0.1)  # and the fractions ~0
     assert len(sync.camera_check) == 7
-    assert all(c == "agrees" or c.startswith("moved") for c in sync.camera_check), sync.camera_check
+    assert all(c.startswith(("agrees", "moved")) for c in sync.camera_check), sync.camera_check
     assert "cameras: " in sync.view_text(1)
 
 
@@ -134,3 +135,67 @@ def test_a_view_without_detections_is_unchecked_and_the_others_still_checked(wal
     np.testing.assert_array_equal(check.shift_frames[[0, 1, 2, 3, 5]], [0, 0, 1, 0, 0])
     empty = check_offsets_with_cameras(detections_to_dense(d.iloc[:0]), walking_scene.rig)
     assert empty.status == ("agrees",) + ("unchecked",) * 5 and not empty.shift_frames.any()
+
+
+def test_the_fraction_of_a_frame_beyond_the_whole_shift_is_measured(body_model):
+    """Cameras started at any instant, not on a frame of view 0's: offsets rounded to whole frames leave up to half a
+    frame; the fraction the cameras measure takes most of it out."""
+    from humancal.sync import apply_time_offsets
+    from humancal.synthetic import generate_scene, preset
+
+    scene = generate_scene(preset("demo", num_views=6, num_people=3, num_frames=150, seed=7,
+                                  time_offset_range_s=(-0.5, 0.5)), body_model, sequence="started")
+    fps = scene.view_clocks["fps"].to_numpy()
+    truth = (scene.view_clocks["time_offset_s"].to_numpy() - scene.view_clocks["time_offset_s"].iloc[0]) * fps[0]
+    whole = np.round(truth)
+    dense = detections_to_dense(apply_time_offsets(scene.detections, whole / fps[0], fps).detections)
+    check = check_offsets_with_cameras(dense, scene.rig)
+    assert not check.shift_frames.any(), check.shift_frames
+    corrected = check.corrected_offsets_s(whole / fps[0], fps[0]) * fps[0]
+    before, after = np.abs(whole - truth)[1:], np.abs(corrected - truth)[1:]
+    print(np.round(before, 3), np.round(after, 3), np.round(check.sub_frame, 3), check.status, check.gain)
+    assert after.mean() < 0.5 * before.mean() and after.max() < 0.25
+
+
+def _slipped(detections: pd.DataFrame, views: list[int]) -> pd.DataFrame:
+    """The detections with each of ``views`` two frames late in the first half of the capture and on time in the
+    second: a clock that slipped (two frames dropped) mid-capture."""
+    split = int(np.median(detections["frame"]))
+    d = detections[~(detections["view"].isin(views) & detections["frame"].between(split - 2, split - 1))].copy()
+    d.loc[d["view"].isin(views) & (d["frame"] < split), "frame"] += 2
+    return d
+
+
+def test_a_view_the_two_halves_place_apart_is_unsure(walking_scene):
+    """View 2's clock slipped mid-capture. The whole capture's curve has some minimum, but each half places it
+    elsewhere: ``"unsure"``; the other views agree, their halves within a fraction of a frame."""
+    check = check_offsets_with_cameras(detections_to_dense(_slipped(walking_scene.detections, [2])),
+                                       walking_scene.rig)
+    assert check.status[2] == "unsure" and check.spread_frames[2] > 1.5, (check.status, check.spread_frames)
+    others = [0, 1, 3, 4, 5]
+    assert all(check.status[v] == "agrees" for v in others), check.status
+    assert np.nanmax(check.spread_frames[others]) < CameraCheckConfig().max_spread_frames
+
+
+def test_unsure_views_are_refused_naming_them_and_the_flag():
+    from humancal.sync.capture import _refuse_disagreeing
+    from humancal.sync.with_cameras import CameraCheck
+
+    check = CameraCheck(shift_frames=np.array([0, 1, 0]), cost_m=np.full((3, 7), 0.02), level_m=np.full(3, 0.02),
+                        gain=np.zeros(3), status=("agrees", "moved", "unsure"), sub_frame=np.array([0, 0.2, -0.1]),
+                        spread_frames=np.array([0.0, 0.1, 2.4]))
+    names = ["front", "left", "right"]
+    with pytest.raises(ValueError) as error:
+        _refuse_disagreeing(check, np.array([0.0, 0.5, -1.0]), names, {"time_offsets": "--time-offsets"}, 30.0)
+    message = str(error.value)
+    assert "view 2 (right, -0.997 s?)" in message and "2.4 frames apart" in message, message
+    assert "--time-offsets right=SECONDS" in message and "left" not in message
+
+
+def test_when_half_the_views_are_unsure_none_is_trusted(walking_scene):
+    """Three of the five views besides the reference slipped: the motion does not fix this capture's clock, and the
+    two that agree are unsure too."""
+    check = check_offsets_with_cameras(detections_to_dense(_slipped(walking_scene.detections, [1, 2, 4])),
+                                       walking_scene.rig)
+    assert check.status == ("agrees",) + ("unsure",) * 5, (check.status, check.spread_frames)
+    assert (check.spread_frames[[3, 5]] < CameraCheckConfig().max_spread_frames).all(), check.spread_frames
