@@ -8,12 +8,13 @@ estimates each view's offset from the detections alone. Per scene: the views exa
 half a frame or more off but used (status ``ok``: silent errors), and the views refused (``ambiguous``, or
 ``unchecked``: one pair of views alone places it; :func:`humancal.sync.capture.synchronise_views` refuses both).
 
-``--with-cameras`` does what ``humancal add --unsynced`` does next: the views with an offset (``ok``, and
-``unchecked``) are put on one clock with the estimated offsets, calibrated from the people (intrinsics, extrinsics),
-and each offset is checked and moved (whole frames and the fraction) with
-:func:`humancal.sync.check_offsets_with_cameras`; a view the cameras disagree with, or are unsure of, is counted as
-refused (``add`` stops on it), an ``unchecked`` one they confirm as used. Scenes with
-fewer than 3 such views are left as the estimate gave them.
+``--with-cameras`` does what ``humancal add --unsynced`` does next: the views with an offset (``ok``, ``unchecked``,
+and ``ambiguous`` ones with a tentative offset, :func:`humancal.sync.tentative_offsets_s`) are put on one clock with
+those offsets, calibrated from the people (intrinsics, extrinsics), and each offset is checked and moved (whole
+frames and the fraction) with :func:`humancal.sync.check_offsets_with_cameras`; a view the cameras disagree with, or
+are unsure of, is counted as refused (``add`` stops on it), an ``unchecked`` or tentative one they confirm (it
+agrees, or moved inside the search) as used. Scenes with fewer than 3 such views are left as the estimate gave them.
+``--no-tentative`` leaves ambiguous views out of the check, as ``add`` did before (the figures at 6ab35cb).
 
 ``--clocks consumer`` draws phone rigs instead (the ``phone`` preset: lens distortion, principal points off centre,
 portrait images), each view filming at 25, 30, 50 or 60 fps, started up to 2 s apart, for 5-15 s; offsets are then
@@ -82,7 +83,8 @@ def _consumer_scene(seed: int, body):
         "fps": "/".join(f"{f:g}" for f in clocks["fps"])}
 
 
-def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str = "studio") -> dict:
+def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str = "studio", tentative: bool = True
+              ) -> dict:
     from humancal.sync import estimate_time_offsets
 
     scene, detections, fps, truth_s, row = (_consumer_scene if clocks == "consumer" else _studio_scene)(seed, body)
@@ -92,7 +94,7 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
     seconds = time.perf_counter() - start
     offsets, used = estimate.offset_frames, np.array([s == "ok" for s in estimate.status])
     if with_cameras:
-        offsets, used, checked = _checked_with_cameras(detections, estimate, scene.rig, lifter)
+        offsets, used, checked = _checked_with_cameras(detections, estimate, scene.rig, lifter, tentative)
         row |= checked
     used = used[1:]
     error = (offsets - truth)[1:]
@@ -108,18 +110,21 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
                   "seconds": round(seconds, 2)}
 
 
-def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray, np.ndarray, dict]:
+def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True) -> tuple[np.ndarray, np.ndarray, dict]:
     """What ``humancal add --unsynced`` does after the estimate (``humancal.sync.capture.synchronise_views``): the
-    views with an offset (``ok`` or ``unchecked``) put on one clock, calibrated from the people and each offset
-    checked and moved (:func:`humancal.sync.capture.calibrate_and_check`). Returns the offsets (reference frames;
+    views with an offset (``ok``, ``unchecked``, tentative) put on one clock, calibrated from the people and each
+    offset checked and moved (:func:`humancal.sync.capture.calibrate_and_check`). Returns the offsets (reference frames;
     NaN for a view the cameras disagree with), which views are used (``ok`` and neither disagreeing nor unsure, or
-    ``unchecked`` and confirmed: the check agrees or moved it), and what the check did."""
+    ``unchecked`` or tentative and confirmed: the check agrees or moved it inside the search), and what the check
+    did."""
+    from humancal.sync import tentative_offsets_s
     from humancal.sync.capture import calibrate_and_check
 
     start = time.perf_counter()
     status = np.array(estimate.status)
-    placed = [v for v, s in enumerate(status) if s in ("ok", "unchecked")]
-    offsets = estimate.offset_frames.copy()
+    offset_s = tentative_offsets_s(estimate) if tentative else estimate.offset_s
+    placed = [v for v, s in enumerate(status) if s in ("ok", "unchecked") or np.isfinite(offset_s[v])]
+    offsets = offset_s * estimate.fps[0]
     used = status == "ok"
     if len(placed) < 3:
         return offsets, used, {"camera_check": "fewer than 3 views placed"}
@@ -127,13 +132,13 @@ def _checked_with_cameras(detections, estimate, rig, lifter) -> tuple[np.ndarray
     kept["view"] = kept["view"].map({v: i for i, v in enumerate(placed)})
     sizes = [(rig[v].width_px, rig[v].height_px) for v in placed]
     try:
-        check = calibrate_and_check(kept, estimate.offset_s[placed], estimate.fps[placed], sizes, lifter)
+        check = calibrate_and_check(kept, offset_s[placed], estimate.fps[placed], sizes, lifter)
     except Exception as error:  # noqa: BLE001 - the sweep records why a scene could not be checked
         return offsets, used, {"camera_check": f"{type(error).__name__}: {error}"}
     verdict = np.array(check.status)
     refused = np.isin(verdict, ("disagrees", "unsure"))
     offsets[placed] = np.where(verdict == "disagrees", np.nan, offsets[placed] - check.shift)
-    confirmed = np.isin(verdict, ("agrees", "moved"))
+    confirmed = np.array([check.confirms(i) for i in range(len(placed))])
     used[placed] = np.where(status[placed] == "ok", ~refused, confirmed)
     return offsets, used, {"camera_check": "ok", "check_views": placed,
                            "check_shift": [int(k) for k in check.shift_frames],
@@ -157,6 +162,9 @@ def main() -> None:
                              "25-60 fps filming 5-15 s")
     parser.add_argument("--with-cameras", action="store_true",
                         help="check the estimated offsets against cameras calibrated from the synchronised views")
+    parser.add_argument("--no-tentative", dest="tentative", action="store_false",
+                        help="with --with-cameras: ambiguous views are refused, not given a tentative offset for the "
+                             "cameras to confirm (as humancal add did before 2026-11-29)")
     args = parser.parse_args()
     seeds = [args.seed * 100_000 + i for i in range(args.scenes)]
 
@@ -178,7 +186,7 @@ def main() -> None:
             checkpoint = (torch.load(args.lifter, map_location="cpu", weights_only=True) if args.lifter
                           else shipped_checkpoint())
             body, lifter = BodyModel(), load_lifter(checkpoint)
-        row = run_scene(seed, body, lifter, args.with_cameras, args.clocks)
+        row = run_scene(seed, body, lifter, args.with_cameras, args.clocks, args.tentative)
         done[seed] = row
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")

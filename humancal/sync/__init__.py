@@ -17,6 +17,7 @@ from humancal.sync.offsets import (
     TimeOffsets,
     estimate_time_offsets,
     per_view_fps,
+    tentative_offsets_s,
 )
 from humancal.sync.with_cameras import CameraCheck, CameraCheckConfig, check_offsets_with_cameras
 from humancal.sync.signals import SIGNAL_KINDS, TrackSignals, track_signals
@@ -38,4 +39,5 @@ __all__ = [
     "link_view_tracks",
     "track_signals",
     "per_view_fps",
+    "tentative_offsets_s",
 ]

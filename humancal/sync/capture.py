@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from humancal.sync.apply import apply_time_offsets
-from humancal.sync.offsets import SyncConfig, TimeOffsets, estimate_time_offsets
+from humancal.sync.offsets import SyncConfig, TimeOffsets, estimate_time_offsets, tentative_offsets_s
 from humancal.sync.with_cameras import CameraCheck, check_offsets_with_cameras
 
 __all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "calibrate_and_check", "synchronise_views"]
@@ -146,18 +146,24 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
         lifter = lifter_factory()
         estimate = estimate_time_offsets(detections, rates, lifter=lifter, config=config)
         unchecked = [v for v, s in enumerate(estimate.status) if s == "unchecked"]
-        # with cameras to check them, unchecked offsets get their chance: the cameras may confirm them
-        _refuse_unusable(estimate, names, option_names, config, [] if image_sizes_px is not None else unchecked)
-        offsets, source, status, confidence = estimate.offset_s, "estimated", estimate.status, estimate.confidence
+        # with cameras to check them, unchecked offsets and tentative ones for ambiguous views get their chance: the
+        # cameras may confirm them
+        offsets = estimate.offset_s if image_sizes_px is None else tentative_offsets_s(estimate)
+        tentative = [v for v in estimate.ambiguous_views() if np.isfinite(offsets[v])]
+        _refuse_unusable(estimate, names, option_names, config, [] if image_sizes_px is not None else unchecked,
+                         ambiguous=sorted(set(estimate.ambiguous_views()) - set(tentative)))
+        source, status, confidence = "estimated", estimate.status, estimate.confidence
         if image_sizes_px is not None:
-            offsets, camera_check = _checked_with_cameras(detections, offsets, rates, names, image_sizes_px, lifter,
-                                                          option_names)
-            confirmed = [v for v in unchecked if camera_check[v].startswith(("agrees", "moved"))]
+            offsets, camera_check, check = _checked_with_cameras(detections, offsets, rates, names, image_sizes_px,
+                                                                 lifter, option_names)
+            confirmed = [v for v in unchecked + tentative if check is not None and check.confirms(v)]
             _refuse_unusable(estimate, names, option_names, config, sorted(set(unchecked) - set(confirmed)),
-                             cameras_tried=True)
+                             ambiguous=sorted(set(tentative) - set(confirmed)), cameras_tried=True)
             status = tuple("ok" if v in confirmed else st for v, st in enumerate(status))
-            camera_check = tuple(f"{c} (confirms an offset one pair of views gave)" if v in confirmed else c
-                                 for v, c in enumerate(camera_check))
+            camera_check = tuple(
+                c + (" (confirms an offset one pair of views gave)" if v in confirmed and v in unchecked
+                     else " (confirms the offset of a view the motion left ambiguous)" if v in confirmed else "")
+                for v, c in enumerate(camera_check))
     else:
         offsets = np.zeros(V)
         source, status, confidence = "given", ("given",) * V, np.full(V, np.nan)
@@ -205,9 +211,9 @@ def calibrate_and_check(detections: pd.DataFrame, offsets_s: np.ndarray, rates: 
 
 def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray, names: Sequence[str],
                           image_sizes_px: Sequence[tuple[int, int]], lifter, option_names: Mapping[str, str]
-                          ) -> tuple[np.ndarray, tuple[str, ...]]:
-    """The estimated offsets after :func:`calibrate_and_check`, and what it did per view (the words of
-    :attr:`CaptureSync.camera_check`).
+                          ) -> tuple[np.ndarray, tuple[str, ...], CameraCheck | None]:
+    """The estimated offsets after :func:`calibrate_and_check`, what it did per view (the words of
+    :attr:`CaptureSync.camera_check`) and the check (None: the calibration failed).
 
     Raises:
         ValueError: a view the cameras disagree with (named, with how to give its offset).
@@ -219,10 +225,10 @@ def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates
         check = calibrate_and_check(detections, offsets_s, rates, image_sizes_px, lifter, names)
     except CalibrationError as error:
         log.warning("the time offsets were not checked against cameras: the calibration failed (%s)", error)
-        return offsets_s, (f"not checked ({type(error).__name__})",) * len(names)
+        return offsets_s, (f"not checked ({type(error).__name__})",) * len(names), None
     _refuse_disagreeing(check, offsets_s, names, option_names, float(rates[0]))
     words = tuple(_check_words(check, v) for v in range(len(names)))
-    return check.corrected_offsets_s(offsets_s, rates[0]), words
+    return check.corrected_offsets_s(offsets_s, rates[0]), words, check
 
 
 def _check_words(check: CameraCheck, v: int) -> str:
@@ -243,8 +249,7 @@ def _refuse_disagreeing(check: CameraCheck, offsets_s: np.ndarray, names: Sequen
     option = option_names["time_offsets"]
     parts = []
     if bad:
-        views = ", ".join(f"view {v} ({names[v]}, {offsets_s[v]:+.3f} s?)" for v in bad)
-        example = " ".join(f"{names[v]}=SECONDS" for v in bad)
+        views, example = _named(bad, names, offsets_s), _flag_values(bad, names)
         parts.append(
             f"{views}: the time offset estimated from the people's motion disagrees with the cameras calibrated from "
             f"them on that clock: the calibration judged the camera disagreeing with the others, or its people miss "
@@ -254,8 +259,7 @@ def _refuse_disagreeing(check: CameraCheck, offsets_s: np.ndarray, names: Sequen
             f"know ({option} {example}), or leave the view out")
     if unsure:
         corrected = check.corrected_offsets_s(offsets_s, reference_fps)
-        views = ", ".join(f"view {v} ({names[v]}, {corrected[v]:+.3f} s?)" for v in unsure)
-        example = " ".join(f"{names[v]}=SECONDS" for v in unsure)
+        views, example = _named(unsure, names, corrected), _flag_values(unsure, names)
         apart = ", ".join("not compared in one half" if not np.isfinite(check.spread_frames[v])
                           else f"{check.spread_frames[v]:.1f}" for v in unsure)
         parts.append(
@@ -266,27 +270,40 @@ def _refuse_disagreeing(check: CameraCheck, offsets_s: np.ndarray, names: Sequen
     raise ValueError(". ".join(parts))
 
 
+def _named(views: Sequence[int], names: Sequence[str], offsets_s: np.ndarray | None = None) -> str:
+    """``view 2 (right, -0.997 s?), ...``: the views as messages name them, with the offset in doubt."""
+    return ", ".join(f"view {v} ({names[v]}" + ("" if offsets_s is None else f", {offsets_s[v]:+.3f} s?") + ")"
+                     for v in views)
+
+
+def _flag_values(views: Sequence[int], names: Sequence[str]) -> str:
+    """``right=SECONDS ...``: the values of the time-offsets option for the views."""
+    return " ".join(f"{names[v]}=SECONDS" for v in views)
+
+
 def _refuse_unusable(estimate: TimeOffsets, names: Sequence[str], option_names: Mapping[str, str],
-                     config: SyncConfig, unchecked: Sequence[int], cameras_tried: bool = False) -> None:
-    """Raise naming every view whose estimated offset is not cross-checked: ambiguous (no clear peak) or, among
-    ``unchecked``, one pair of views alone places it and nothing confirms it (on the synthetic sweep such views were
-    the ones used one or more frames off); ``cameras_tried``: the calibrated cameras did not confirm them either."""
-    ambiguous = [] if cameras_tried else estimate.ambiguous_views()
+                     config: SyncConfig, unchecked: Sequence[int], ambiguous: Sequence[int] | None = None,
+                     cameras_tried: bool = False) -> None:
+    """Raise naming every view whose estimated offset is not cross-checked: among ``ambiguous`` (default: the
+    estimate's), no clear peak, or among ``unchecked``, one pair of views alone places it; and nothing confirms it
+    (on the synthetic sweep such views were the ones used one or more frames off); ``cameras_tried``: the calibrated
+    cameras did not confirm them either (for an ambiguous view: its tentative offset)."""
+    ambiguous = estimate.ambiguous_views() if ambiguous is None else list(ambiguous)
     if not (ambiguous or unchecked):
         return
     option = option_names["time_offsets"]
     parts = []
     if ambiguous:
-        views = ", ".join(f"view {v} ({names[v]})" for v in ambiguous)
-        example = " ".join(f"{names[v]}=SECONDS" for v in ambiguous)
+        views, example = _named(ambiguous, names), _flag_values(ambiguous, names)
         parts.append(
             f"{views}: the time offset is ambiguous: the people's motion gives no clear peak within "
             f"+-{config.max_offset_s:g} s of view 0 ({names[0]}) (people who hardly move, or a motion that repeats, "
-            f"like a steady walk). Film people moving (walking, stopping, turning, waving) in the shared field of "
-            f"view for longer, or give the offsets ({option} {example})")
+            f"like a steady walk)"
+            f"{'; the cameras calibrated from the people did not confirm a tentative offset' if cameras_tried else ''}"
+            f". Film people moving (walking, stopping, turning, waving) in the shared field of view for longer, or "
+            f"give the offsets ({option} {example})")
     if unchecked:
-        views = ", ".join(f"view {v} ({names[v]}, {estimate.offset_s[v]:+.3f} s?)" for v in unchecked)
-        example = " ".join(f"{names[v]}=SECONDS" for v in unchecked)
+        views, example = _named(unchecked, names, estimate.offset_s), _flag_values(unchecked, names)
         parts.append(
             f"{views}: the time offset rests on one pair of views only, no other pair "
             f"{'nor the cameras calibrated from the people ' if cameras_tried else ''}confirms it, so it is not "

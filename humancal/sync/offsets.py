@@ -46,7 +46,7 @@ from humancal.sync.signals import SIGNAL_KINDS, track_signals
 from humancal.tables.detections import detections_to_dense
 
 __all__ = ["STATUSES", "SyncConfig", "PairOffset", "TimeOffsets", "estimate_time_offsets",
-           "estimate_time_offsets_lifted", "per_view_fps"]
+           "estimate_time_offsets_lifted", "per_view_fps", "tentative_offsets_s"]
 
 log = logging.getLogger(__name__)
 
@@ -327,6 +327,28 @@ def _joint_fine(signals: list[ClockTracks], used: list[PairOffset], offsets: np.
         if not moved:
             break
     return np.where(np.isfinite(offsets), sample / rate, np.nan)
+
+
+def tentative_offsets_s(estimate: TimeOffsets, tolerance_frames: float = 2.0) -> np.ndarray:
+    """(V,) seconds: the estimate's offsets, and for each ambiguous view a tentative one: the least-squares offsets
+    of every pair whose correlation has a peak, clear or not (weights: the margins, at least 0.005), the most
+    disagreeing pair dropped until all agree within ``tolerance_frames`` reference frames (NaN where no pair links
+    the view to view 0). Never to be used unchecked: on the sync sweep's seated people such offsets were 0-4 frames
+    off, a few tens of frames (:func:`humancal.sync.capture.synchronise_views` has the cameras check them)."""
+    V = len(estimate.status)
+    pairs = [p for p in estimate.pairs if np.isfinite(p.offset_s)]
+    solved = np.full(V, np.nan)
+    solved[0] = 0.0
+    while pairs:
+        solved = _solve(V, pairs, np.array([max(p.margin, 0.005) for p in pairs]))
+        residual = np.array([abs(solved[p.b] - solved[p.a] - p.offset_s) * estimate.fps[0]
+                             if np.isfinite(solved[p.a]) and np.isfinite(solved[p.b]) else 0.0 for p in pairs])
+        worst = int(np.argmax(residual))
+        if residual[worst] <= tolerance_frames:
+            break
+        pairs.pop(worst)
+    ambiguous = np.array([s == "ambiguous" for s in estimate.status])
+    return np.where(ambiguous, solved, estimate.offset_s)
 
 
 def _cross_checked(num_views: int, pairs: list[PairOffset]) -> np.ndarray:

@@ -146,6 +146,12 @@ class CameraCheck:
         """(V,) the whole shift plus its fraction, reference frames."""
         return self.shift_frames + (0.0 if self.sub_frame is None else self.sub_frame)
 
+    def confirms(self, view: int) -> bool:
+        """Whether the cameras vouch for the view's offset: it agrees, or moved inside the search (a view moved to
+        its edge may belong further out)."""
+        K = (self.cost_m.shape[1] - 1) // 2
+        return self.status[view] in ("agrees", "moved") and abs(int(self.shift_frames[view])) < K
+
     def corrected_offsets_s(self, offsets_s: np.ndarray, reference_fps: float) -> np.ndarray:
         """(V,) the offsets, seconds, with each view's shift (whole and fraction) taken out (module docstring)."""
         return np.asarray(offsets_s, dtype=float) - self.shift / float(reference_fps)

@@ -166,3 +166,20 @@ def test_image_signal_without_a_lifter_finds_walking_offsets(walking_scene):
     placed = np.array([s != "ambiguous" for s in offsets.status])
     assert placed.sum() >= 3, offsets.status
     assert np.abs(offsets.offset_frames[placed] - truth[placed]).max() < 3
+
+
+def test_tentative_offsets_for_views_the_motion_leaves_ambiguous(body_model, lifter):
+    """Seated people (scene 1 of ``scripts/sync_sweep.py --seed 0``): every pair's correlation peaks near the truth
+    but none clearly, so every view but the reference is ambiguous; the tentative offsets from all the peaks
+    together are within a few frames (for the cameras to check, never to be used as they are)."""
+    from humancal.sync import tentative_offsets_s
+    from humancal.synthetic import generate_scene, preset
+
+    scene = generate_scene(preset("demo", num_views=7, num_people=3, num_frames=301, seed=1001, behaviour="seated"),
+                           body_model, sequence="sync_1")
+    starts = np.array([2, 8, 50, 57, 15, 19, 53])
+    estimate = estimate_time_offsets(started_by_hand(scene.detections, starts, 241), 30.0, lifter=lifter)
+    assert estimate.ambiguous_views() == [1, 2, 3, 4, 5, 6], estimate.status
+    tentative = tentative_offsets_s(estimate) * 30.0
+    assert tentative[0] == 0 and np.isfinite(tentative).all()
+    assert np.abs(tentative - (starts - starts[0])).max() < 3, tentative

@@ -199,3 +199,23 @@ def test_when_half_the_views_are_unsure_none_is_trusted(walking_scene):
                                        walking_scene.rig)
     assert check.status == ("agrees",) + ("unsure",) * 5, (check.status, check.spread_frames)
     assert (check.spread_frames[[3, 5]] < CameraCheckConfig().max_spread_frames).all(), check.spread_frames
+
+
+@pytest.mark.slow
+def test_seated_people_leave_add_refusing_with_the_offsets_in_doubt(body_model):
+    """Seated people (scene 1 of ``scripts/sync_sweep.py --seed 0``): the motion leaves every view ambiguous, the
+    tentative offsets go to the cameras, and the two halves of the capture place the views apart: refused, naming
+    them and the flag, never stored silently."""
+    from humancal.lifter import load_lifter, shipped_checkpoint
+    from humancal.synthetic import generate_scene, preset
+
+    scene = generate_scene(preset("demo", num_views=7, num_people=3, num_frames=301, seed=1001, behaviour="seated"),
+                           body_model, sequence="sync_1")
+    detections = started_by_hand(scene.detections, np.array([2, 8, 50, 57, 15, 19, 53]), 241)
+    lifter = load_lifter(shipped_checkpoint())
+    with pytest.raises(ValueError, match="cannot fix the time offset to the frame") as error:
+        synchronise_views(detections, [f"cam{v}" for v in range(7)], fps=30.0, view_fps=(), unsynced=True,
+                          time_offsets_s=(), option_names={"view_fps": "--fps", "time_offsets": "--time-offsets"},
+                          lifter_factory=lambda: lifter,
+                          image_sizes_px=[(c.width_px, c.height_px) for c in scene.rig])
+    assert "--time-offsets" in str(error.value) and "cam1=SECONDS" in str(error.value)
