@@ -130,7 +130,8 @@ class CameraCheck:
             view's rays meet the others' best (0 for view 0, and for a view ``"disagrees"`` or ``"unchecked"``).
         spread_frames: (V,) how far apart the first and the second half of the capture, each searched alone, place
             the view (whole shift and fraction, reference frames; NaN for a view ``"disagrees"`` or
-            ``"unchecked"``): a view the people's motion places to the frame has both halves agree.
+            ``"unchecked"``, inf for one a half compares nowhere): a view the people's motion places to the frame
+            has both halves agree.
     """
 
     shift_frames: np.ndarray
