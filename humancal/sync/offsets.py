@@ -258,7 +258,7 @@ def estimate_time_offsets_lifted(dense, rates: np.ndarray, joints_m: np.ndarray 
             clear = peak.peak >= config.min_peak and peak.margin >= config.min_margin
             lag = _fine_lag(signals[a], signals[b], peak, max_lag, min_overlap, config.fine_samples)
             pairs.append(PairOffset(a, b, lag / rate, peak.peak, peak.margin, clear))
-    offsets, used = _consistent_offsets(V, pairs, float(rates[0]), config.tolerance_frames)
+    offsets, used = _consistent_offsets(V, [p for p in pairs if p.clear], float(rates[0]), config.tolerance_frames)
     pairs = [PairOffset(p.a, p.b, p.offset_s, p.peak, p.margin, p.clear, (p.a, p.b) in used) for p in pairs]
     if config.joint_fine and config.fine_samples:
         offsets = _joint_fine(signals, [p for p in pairs if p.used], offsets, rate, min_overlap,
@@ -335,18 +335,9 @@ def tentative_offsets_s(estimate: TimeOffsets, tolerance_frames: float = 2.0) ->
     disagreeing pair dropped until all agree within ``tolerance_frames`` reference frames (NaN where no pair links
     the view to view 0). Never to be used unchecked: on the sync sweep's seated people such offsets were 0-4 frames
     off, a few tens of frames (:func:`humancal.sync.capture.synchronise_views` has the cameras check them)."""
-    V = len(estimate.status)
     pairs = [p for p in estimate.pairs if np.isfinite(p.offset_s)]
-    solved = np.full(V, np.nan)
-    solved[0] = 0.0
-    while pairs:
-        solved = _solve(V, pairs, np.array([max(p.margin, 0.005) for p in pairs]))
-        residual = np.array([abs(solved[p.b] - solved[p.a] - p.offset_s) * estimate.fps[0]
-                             if np.isfinite(solved[p.a]) and np.isfinite(solved[p.b]) else 0.0 for p in pairs])
-        worst = int(np.argmax(residual))
-        if residual[worst] <= tolerance_frames:
-            break
-        pairs.pop(worst)
+    solved, _ = _consistent_offsets(len(estimate.status), pairs, float(estimate.fps[0]), tolerance_frames,
+                                    min_weight=0.005)
     ambiguous = np.array([s == "ambiguous" for s in estimate.status])
     return np.where(ambiguous, solved, estimate.offset_s)
 
@@ -361,13 +352,13 @@ def _cross_checked(num_views: int, pairs: list[PairOffset]) -> np.ndarray:
     return _component_of(num_views, on_cycle, 0)
 
 
-def _consistent_offsets(num_views: int, pairs: list[PairOffset], fps_ref: float, tolerance_frames: float
-                        ) -> tuple[np.ndarray, set[tuple[int, int]]]:
-    """Least-squares offsets from the clear pairs, dropping the worst disagreeing pair until all agree; the pairs
-    kept."""
-    kept = [p for p in pairs if p.clear]
+def _consistent_offsets(num_views: int, pairs: list[PairOffset], fps_ref: float, tolerance_frames: float,
+                        min_weight: float = 0.0) -> tuple[np.ndarray, set[tuple[int, int]]]:
+    """Least-squares offsets from ``pairs`` (weights: their margins, at least ``min_weight``), dropping the worst
+    disagreeing pair until all agree within ``tolerance_frames``; the pairs kept."""
+    kept = list(pairs)
     while True:
-        offsets = _solve(num_views, kept, np.array([p.margin for p in kept]))
+        offsets = _solve(num_views, kept, np.array([max(p.margin, min_weight) for p in kept]))
         if not kept:
             return offsets, set()
         residual = np.array([abs(offsets[p.b] - offsets[p.a] - p.offset_s) * fps_ref
