@@ -23,7 +23,9 @@ as filmed). Without it the offsets are NaN, and the calibration gets the detecti
 numbers: unsynchronised), unless ``--oracle-sync``:
 then each view's frames nearest in time to the reference frames, relabelled with them, using the TRUE offsets and frame
 rates (:func:`humancal.synthetic.clocks.to_reference_frames`; for a view at the reference rate a shift by its true
-integer frame offset). The summary says which mode ran.
+integer frame offset). The summary says which mode ran. ``--interpolate``: each view's people at the reference
+frames' times, blended between its two frames around each (``to_reference_frames(..., interpolate=True)``), with
+the true offsets or the estimated ones.
 
 Lens and principal point. The calibration's cameras are read as they come (``Camera.distortion``, ``Camera.K``): k1 / k2
 count as estimated where they are not 0, a principal point where it is not the image centre; their errors against the
@@ -142,7 +144,7 @@ def _lens_rows(estimated, truth, clocks: pd.DataFrame, offsets_s: np.ndarray) ->
     return rows
 
 
-def run_scene(index: int, seed: int, oracle_sync: bool, lens: dict | None = None) -> dict:
+def run_scene(index: int, seed: int, oracle_sync: bool, lens: dict | None = None, interpolate: bool = False) -> dict:
     """Generate, (synchronise,) lift, calibrate and score scene ``index``; returns {"scene": ..., "views": [...]}.
     ``lens``: ``ExtrinsicsConfig`` lens settings (``lens_models``, ``principal_point``) other than the defaults."""
     from humancal.calibration import ExtrinsicsConfig
@@ -168,14 +170,15 @@ def run_scene(index: int, seed: int, oracle_sync: bool, lens: dict | None = None
         offsets, sync_note = np.full(len(fps), np.nan), f"sync failed: {type(error).__name__}: {error}"
     scene_row["sync_s"] = time.perf_counter() - clock
     if oracle_sync:
-        detections, mode = to_reference_frames(scene.detections, fps, true_offsets, config.fps), "oracle"
+        detections = to_reference_frames(scene.detections, fps, true_offsets, config.fps, interpolate=interpolate)
+        mode = "oracle"
     elif np.isfinite(offsets).any():  # a view the estimate leaves ambiguous keeps its frames as filmed (offset 0)
         known = np.where(np.isfinite(offsets), offsets, 0.0)
-        detections = to_reference_frames(scene.detections, fps, known, config.fps)
+        detections = to_reference_frames(scene.detections, fps, known, config.fps, interpolate=interpolate)
         mode = "estimated" if np.isfinite(offsets).all() else "estimated, ambiguous views as filmed"
     else:
         detections, mode = scene.detections, "as filmed"
-    scene_row.update(sync_mode=mode, sync_note=sync_note)
+    scene_row.update(sync_mode=mode + (", interpolated" if interpolate else ""), sync_note=sync_note)
     clock = time.perf_counter()
     dense = detections_to_dense(detections)
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
@@ -193,9 +196,9 @@ def run_scene(index: int, seed: int, oracle_sync: bool, lens: dict | None = None
     return {"scene": scene_row, "views": views}
 
 
-def _run_and_store(job: tuple[int, int, str, bool, dict]) -> str:
-    index, seed, folder, oracle, lens = job
-    result = run_scene(index, seed, oracle, lens)
+def _run_and_store(job: tuple[int, int, str, bool, dict, bool]) -> str:
+    index, seed, folder, oracle, lens, interpolate = job
+    result = run_scene(index, seed, oracle, lens, interpolate)
     path = Path(folder) / f"scene_{index:04d}.json"
     partial = path.with_suffix(".partial")
     partial.write_text(json.dumps(result, default=float))
@@ -274,6 +277,8 @@ def main() -> None:
                         help="the calibration's principal point setting (default: its own, centre)")
     parser.add_argument("--oracle-sync", action="store_true",
                         help="feed the calibration the detections put on the reference clock with the TRUE time offsets")
+    parser.add_argument("--interpolate", action="store_true",
+                        help="blend each view's detections between frames at the reference frames' times")
     args = parser.parse_args()
     specs = [s.strip() for s in args.lifters.split(",") if s.strip()]
     for spec in specs:
@@ -285,14 +290,14 @@ def main() -> None:
     if args.principal_point:
         lens["principal_point"] = args.principal_point
     # the modes never mix their results
-    suffix = ("_oracle_sync" if args.oracle_sync else "") + "".join(
+    suffix = ("_oracle_sync" if args.oracle_sync else "") + ("_interpolated" if args.interpolate else "") + "".join(
         f"_{k}_{'-'.join(v) if isinstance(v, tuple) else v}" for k, v in lens.items())
     folder = args.out / f"scenes{suffix}"
     folder.mkdir(parents=True, exist_ok=True)
     indices = [int(i) for i in args.only.split(",")] if args.only else list(range(args.scenes))
     todo = [i for i in indices if not (folder / f"scene_{i:04d}.json").exists()]
     print(f"{len(indices) - len(todo)} scenes already done in {folder}; {len(todo)} to run", flush=True)
-    run_jobs([(i, args.seed, str(folder), args.oracle_sync, lens) for i in todo], _run_and_store,
+    run_jobs([(i, args.seed, str(folder), args.oracle_sync, lens, args.interpolate) for i in todo], _run_and_store,
              stress_sweep._init_worker, (specs,), args.jobs)
     results = [json.loads((folder / f"scene_{i:04d}.json").read_text()) for i in indices]
     scenes = pd.DataFrame([r["scene"] for r in results])

@@ -62,10 +62,10 @@ def _studio_scene(seed: int, body):
                                                                         "frames": frames, "behaviour": behaviour}
 
 
-def _consumer_scene(seed: int, body):
+def _consumer_scene(seed: int, body, noise=None):
     """``--clocks consumer``: phones (the ``phone`` preset: k1 up to 0.1, principal points up to 5 % off centre,
     portrait two scenes in three) filming at 25, 30, 50 or 60 fps each, started up to 2 s apart, for 5-15 s;
-    as :func:`_studio_scene`."""
+    as :func:`_studio_scene`. ``noise``: another detector (a ``DetectorNoise``; None: the preset's)."""
     from humancal.synthetic import generate_scene, preset
 
     rng = np.random.default_rng(seed)
@@ -76,6 +76,8 @@ def _consumer_scene(seed: int, body):
     size = (1080, 1920) if rng.random() < 2 / 3 else (1920, 1080)
     config = preset("phone", num_views=views, num_people=people, num_frames=frames, seed=1000 + seed,
                     behaviour=behaviour, image_size_px=size, view_fps_choices=(25.0, 30.0, 50.0, 60.0))
+    if noise is not None:
+        config = config.replace(noise=noise)
     scene = generate_scene(config, body, sequence=f"sync_{seed}")
     clocks = scene.view_clocks
     return scene, scene.detections, clocks["fps"].to_numpy(), clocks["time_offset_s"].to_numpy(), {

@@ -6,10 +6,11 @@ Example:
     >>> offsets = estimate_time_offsets(detections, fps=30.0, lifter=lifter)  # doctest: +SKIP
     >>> offsets.status, offsets.offset_frames  # doctest: +SKIP
     (('ok', 'ok', 'ok'), array([ 0., 12., -7.]))
-    >>> synced = apply_time_offsets(detections, offsets.offset_s, 30.0)  # doctest: +SKIP
+    >>> synced = apply_time_offsets(detections, offsets.offset_s, 30.0, interpolate=True)  # doctest: +SKIP
 """
 
 from humancal.sync.apply import AppliedOffsets, apply_time_offsets
+from humancal.sync.interpolate import ViewAtTimes, view_at_times
 from humancal.sync.offsets import (
     STATUSES,
     PairOffset,
@@ -33,6 +34,7 @@ __all__ = [
     "PairOffset",
     "SyncConfig",
     "TimeOffsets",
+    "ViewAtTimes",
     "apply_time_offsets",
     "check_offsets_with_cameras",
     "estimate_time_offsets",
@@ -40,4 +42,5 @@ __all__ = [
     "track_signals",
     "per_view_fps",
     "tentative_offsets_s",
+    "view_at_times",
 ]

@@ -1,18 +1,20 @@
 """The detections of unsynchronised views moved to one clock: view 0's frames.
 
 View ``v``'s frame ``n`` is taken at reference time ``t = n / fps_v + offset_v`` seconds
-(:mod:`humancal.sync.offsets`); on view 0's clock that is frame ``r = (t - offset_0) * fps_0``. Each frame of a view
-goes to the nearest reference frame, ``round(r)``:
+(:mod:`humancal.sync.offsets`); on view 0's clock that is frame ``r = (t - offset_0) * fps_0``. Two ways to put a
+view on view 0's frames:
 
-- same frame rate, an offset of a whole number of frames: a renumbering, nothing else changes;
-- a fraction of a frame left over (an estimated offset, or a given one in seconds): the frames are rounded to the
-  nearest reference frame, and the remainder is reported per view (``residual_frames``; at most half a frame). The
-  method then treats the views as in sync; a bundle adjustment with interpolated detections could use the
-  remainders later, none does today;
-- another frame rate: each frame goes to its nearest reference frame (no interpolation); where two frames of a
-  faster view land on one reference frame, the nearer in time is kept and the other dropped; a slower view leaves
-  some reference frames empty.
+- **interpolated** (``interpolate=True``): for each frame ``m`` of view 0 the view's people at that time, blended
+  from the two frames of each of its 2D tracks around it (:func:`humancal.sync.interpolate.view_at_times`). A
+  detection whose track has no frame on the other side is taken from the nearest frame, and its remainder
+  reported (``residual_frames``). A faster view gives one detection per track and reference frame; a slower one
+  is blended for every reference frame between its frames.
+- **nearest frame** (``interpolate=False``): each frame of a view goes to the nearest reference frame,
+  ``round(r)``, and the remainder is reported per view (at most half a frame). Where two frames of a faster view
+  land on one reference frame, the nearer in time is kept and the other dropped; a slower view leaves some
+  reference frames empty.
 
+Same frame rate and an offset of a whole number of frames: both are a renumbering and nothing else changes.
 Frames that land before reference frame 0 or after view 0's last frame are dropped (counted per view).
 """
 
@@ -24,7 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from humancal.sync.interpolate import view_at_times
 from humancal.sync.offsets import per_view_fps
+from humancal.tables.detections import dense_to_detections, detections_to_dense
 
 __all__ = ["AppliedOffsets", "apply_time_offsets"]
 
@@ -36,25 +40,29 @@ class AppliedOffsets:
     Attributes:
         detections: the canonical ``detections`` table with ``frame`` on view 0's clock (rows in the input's order,
             the dropped ones left out).
-        residual_frames: (V,) the largest |remainder| of a kept frame after rounding, reference frames (0 for a
-            renumbering).
-        dropped_frames: (V,) frames with detections dropped: outside the reference range, or a second frame of a
-            faster view on the same reference frame.
+        residual_frames: (V,) the largest |remainder| of a kept detection taken from its nearest frame, reference
+            frames (0 for a renumbering, and for views whose every detection was interpolated).
+        dropped_frames: (V,) frames with detections that went into no kept detection: outside the reference range,
+            or (nearest frame) a second frame of a faster view on the same reference frame.
+        interpolated: (V,) kept detections blended from two frames (0 without ``interpolate``).
     """
 
     detections: pd.DataFrame
     residual_frames: np.ndarray
     dropped_frames: np.ndarray
+    interpolated: np.ndarray
 
 
 def apply_time_offsets(detections: pd.DataFrame, offsets_s: Sequence[float] | np.ndarray,
-                       fps: float | Sequence[float]) -> AppliedOffsets:
+                       fps: float | Sequence[float], *, interpolate: bool = False) -> AppliedOffsets:
     """Move every view's detections to view 0's frames.
 
     Args:
         detections: canonical ``detections`` table, each view's frames numbered on its own clock.
         offsets_s: (V,) time offsets, seconds (module docstring), one per view ``0 .. V-1``.
         fps: frames per second, one for every view or one per view.
+        interpolate: blend each view's people between its frames at view 0's frame times (module docstring), not
+            take the nearest frame.
 
     Returns:
         The :class:`AppliedOffsets`.
@@ -74,6 +82,8 @@ def apply_time_offsets(detections: pd.DataFrame, offsets_s: Sequence[float] | np
     view = detections["view"].to_numpy(np.int64)
     view0 = frame[view == 0]
     last = int(view0.max()) if len(view0) else -1
+    if interpolate:
+        return _interpolated(detections, offsets, rates, last)
     new_frame = frame.copy()
     keep = np.ones(len(frame), dtype=bool)
     residual = np.zeros(V)
@@ -100,4 +110,33 @@ def apply_time_offsets(detections: pd.DataFrame, offsets_s: Sequence[float] | np
         new_frame[rows] = target[lookup]
     out = detections.loc[keep].copy()
     out["frame"] = new_frame[keep].astype(detections["frame"].dtype)
-    return AppliedOffsets(out.reset_index(drop=True), residual, dropped)
+    return AppliedOffsets(out.reset_index(drop=True), residual, dropped, np.zeros(V, dtype=np.int64))
+
+
+def _interpolated(detections: pd.DataFrame, offsets: np.ndarray, rates: np.ndarray, last: int) -> AppliedOffsets:
+    """:func:`apply_time_offsets` with ``interpolate``: view 0 as it is, every other view at view 0's frame times
+    ``0 .. last``."""
+    V = len(offsets)
+    sequences = detections["sequence"].unique()
+    if len(sequences) > 1:
+        raise ValueError(f"detections: expected one sequence, got {sorted(map(str, sequences))}")
+    dense = detections_to_dense(detections)
+    residual = np.zeros(V)
+    dropped = np.zeros(V, dtype=np.int64)
+    interpolated = np.zeros(V, dtype=np.int64)
+    parts = [detections.loc[detections["view"].to_numpy() == 0]]
+    reference = np.arange(last + 1, dtype=np.float64)
+    for v in range(1, V):
+        filmed = np.unique(dense.frame[dense.view == v])
+        if not len(filmed):
+            continue
+        source = ((reference / rates[0] + offsets[0]) - offsets[v]) * rates[v]
+        at = view_at_times(dense, v, source)
+        dropped[v] = len(np.setdiff1d(filmed, at.used_frames))
+        interpolated[v] = int(at.interpolated.sum())
+        if len(at.remainder_frames):
+            residual[v] = float(np.abs(at.remainder_frames).max()) * rates[0] / rates[v]
+        if len(at.detections):
+            parts.append(dense_to_detections(at.detections, str(sequences[0])))
+    out = pd.concat(parts, ignore_index=True).astype(detections.dtypes.to_dict())
+    return AppliedOffsets(out, residual, dropped, interpolated)

@@ -36,13 +36,16 @@ class CaptureSync:
         status: (V,) ``"ok"`` (estimated and cross-checked: by a cycle of pairs of views, or by the cameras
             calibrated from the people) or ``"given"`` (an unchecked or ambiguous estimate is refused, never stored).
         confidence: (V,) the estimate's margin (NaN where given).
-        residual_frames: (V,) the largest sub-frame remainder rounded away, reference frames.
+        residual_frames: (V,) the largest sub-frame remainder of a detection taken from its nearest frame, reference
+            frames (0 where every detection was interpolated).
         dropped_frames: (V,) frames with detections dropped (outside view 0's frames, or merged).
         reference_fps: the reference clock's frames per second (view 0's, before any view was left out).
         camera_check: (V,) what the check against cameras calibrated from the people did to each estimated offset
             (:func:`humancal.sync.check_offsets_with_cameras`: ``"agrees"``, ``"agrees (+0.21 frame)"``,
             ``"moved +1.30 frames"``, ``"flat"``),
             or why it did not run; empty where the offsets were given.
+        interpolated: (V,) detections blended between two of the view's frames at view 0's frame times
+            (:func:`humancal.sync.apply_time_offsets` with ``interpolate``); empty where the nearest frames were taken.
     """
 
     source: str
@@ -55,6 +58,7 @@ class CaptureSync:
     dropped_frames: tuple[int, ...]
     reference_fps: float = DEFAULT_SYNC_FPS
     camera_check: tuple[str, ...] = ()
+    interpolated: tuple[int, ...] = ()
 
     def pick(self, views: Sequence[int]) -> CaptureSync:
         """The same for the views ``views`` only (after some were left out)."""
@@ -63,7 +67,8 @@ class CaptureSync:
 
         return CaptureSync(self.source, sub(self.fps), sub(self.offset_s), sub(self.offset_frames), sub(self.status),
                            sub(self.confidence), sub(self.residual_frames), sub(self.dropped_frames),
-                           self.reference_fps, sub(self.camera_check) if self.camera_check else ())
+                           self.reference_fps, sub(self.camera_check) if self.camera_check else (),
+                           sub(self.interpolated) if self.interpolated else ())
 
     def view_text(self, v: int) -> str:
         """View ``v``'s offset in words, for the capture summary."""
@@ -75,6 +80,8 @@ class CaptureSync:
         text += ")"
         if self.fps[v] != self.reference_fps:
             text += f", {self.fps[v]:g} fps"
+        if self.interpolated and self.interpolated[v]:
+            text += f", {self.interpolated[v]} detections interpolated between frames"
         if self.residual_frames[v] > 1e-6:
             text += f", up to {self.residual_frames[v]:.2f} frame rounded"
         if self.dropped_frames[v]:
@@ -99,7 +106,8 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
                       view_fps: Sequence[tuple[str, float]], unsynced: bool,
                       time_offsets_s: Sequence[tuple[str, float]], option_names: Mapping[str, str],
                       lifter_factory=None, config: SyncConfig = SyncConfig(),
-                      image_sizes_px: Sequence[tuple[int, int]] | None = None) -> tuple[pd.DataFrame, CaptureSync]:
+                      image_sizes_px: Sequence[tuple[int, int]] | None = None, interpolate: bool = True
+                      ) -> tuple[pd.DataFrame, CaptureSync]:
     """Move a capture's detections to view 0's frames.
 
     The offsets are ``time_offsets_s`` where given (``unsynced`` then says they were estimated by ``humancal add``),
@@ -120,6 +128,8 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
         config: the search.
         image_sizes_px: (V,) ``(width, height)`` of each view's images: estimated offsets are checked against
             cameras calibrated from the people (None: not checked).
+        interpolate: each view's people at view 0's frame times, blended between the view's two frames around each
+            (a detection whose track has no frame on the other side: its nearest frame); False: the nearest frames.
 
     Returns:
         ``(detections on view 0's frames, how)``.
@@ -167,11 +177,11 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
     else:
         offsets = np.zeros(V)
         source, status, confidence = "given", ("given",) * V, np.full(V, np.nan)
-    applied = apply_time_offsets(detections, offsets, rates)
+    applied = apply_time_offsets(detections, offsets, rates, interpolate=interpolate)
     sync = CaptureSync(source, tuple(map(float, rates)), tuple(map(float, offsets)),
                        tuple(float(o * rates[0]) for o in offsets), tuple(status), tuple(map(float, confidence)),
                        tuple(map(float, applied.residual_frames)), tuple(map(int, applied.dropped_frames)),
-                       float(rates[0]), camera_check)
+                       float(rates[0]), camera_check, tuple(map(int, applied.interpolated)) if interpolate else ())
     for v, name in enumerate(names):
         log.info("view %d (%s): %s", v, name, sync.view_text(v))
     return applied.detections, sync

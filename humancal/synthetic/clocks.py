@@ -152,17 +152,20 @@ def hidden_at(hidden: np.ndarray | None, clocks: ViewClocks, view: int) -> np.nd
 
 
 def to_reference_frames(detections: pd.DataFrame, fps: np.ndarray, time_offset_s: np.ndarray,
-                        reference_fps: float) -> pd.DataFrame:
+                        reference_fps: float, *, interpolate: bool = False) -> pd.DataFrame:
     """Detections moved onto the reference clock with known clocks (an oracle synchronisation, for evaluation):
     for every reference frame ``m`` each view gives its frame nearest in time, ``n = round((m / reference_fps -
     offset_v) fps_v)``, relabelled ``m``; the view's other frames are dropped (a 60 fps view gives every other
     frame to a 30 fps reference). The remaining error is the sub-frame part: at most half a frame of the slower clock.
+    With ``interpolate``, each view's people at the reference frame's time instead, blended between the two frames
+    around it along the view's 2D tracks (:func:`humancal.sync.interpolate.view_at_times`).
 
     Args:
         detections: a canonical ``detections`` table whose ``frame`` column holds each view's own frame numbers.
         fps: (V,) frame rate of each view, frames per second.
         time_offset_s: (V,) reference time of each view's frame 0, seconds.
         reference_fps: frame rate of the reference clock, frames per second.
+        interpolate: blend between frames, not take the nearest.
 
     Returns:
         The detections with ``frame`` on the reference clock (rows of frames that land before reference frame 0 are
@@ -173,10 +176,27 @@ def to_reference_frames(detections: pd.DataFrame, fps: np.ndarray, time_offset_s
     view = detections["view"].to_numpy()
     n = detections["frame"].to_numpy()
     reference = np.rint((n / fps[view] + offset[view]) * reference_fps).astype(np.int64)
+    if interpolate:
+        return _interpolated(detections, fps, offset, reference_fps, int(reference.max(initial=-1)))
     # the view's frame nearest to the reference frame's time: keep a row only if its frame is that one
     nearest = np.rint((reference / reference_fps - offset[view]) * fps[view]).astype(np.int64)
     keep = (nearest == n) & (reference >= 0)
     return detections.loc[keep].assign(frame=reference[keep]).reset_index(drop=True)
+
+
+def _interpolated(detections: pd.DataFrame, fps: np.ndarray, offset: np.ndarray, reference_fps: float,
+                  last: int) -> pd.DataFrame:
+    """:func:`to_reference_frames` with ``interpolate``: every view at the reference frames ``0 .. last``."""
+    from humancal.sync.interpolate import view_at_times
+    from humancal.tables.detections import dense_to_detections, detections_to_dense
+
+    if not len(detections):
+        return detections.copy()
+    dense = detections_to_dense(detections)
+    times = np.arange(last + 1) / reference_fps
+    parts = [dense_to_detections(view_at_times(dense, v, (times - offset[v]) * fps[v]).detections,
+                                 str(detections["sequence"].iloc[0])) for v in np.unique(dense.view)]
+    return pd.concat(parts, ignore_index=True).astype(detections.dtypes.to_dict())
 
 
 def started_by_hand(detections: pd.DataFrame, starts, num_frames: int) -> pd.DataFrame:

@@ -14,7 +14,7 @@ import pandas as pd
 from humancal.keypoints import CANONICAL_JOINTS, NUM_JOINTS
 from humancal.tables.pivot import has_repeats, name_codes, unique_rows
 
-__all__ = ["DenseDetections", "detections_to_dense"]
+__all__ = ["DenseDetections", "dense_to_detections", "detections_to_dense"]
 
 
 @dataclass(frozen=True)
@@ -66,3 +66,26 @@ def detections_to_dense(detections: pd.DataFrame) -> DenseDetections:
     kp[row, col, 1] = detections["y_px"].to_numpy()
     sc[row, col] = detections["score"].to_numpy()
     return DenseDetections(uniq[:, 0], uniq[:, 1], uniq[:, 2], kp, sc)
+
+
+def dense_to_detections(dense: DenseDetections, sequence: str) -> pd.DataFrame:
+    """The canonical ``detections`` table of :class:`DenseDetections` (the inverse of :func:`detections_to_dense`):
+    one row per joint with a score above 0, sorted by frame, view, det_id and canonical joint order.
+
+    Args:
+        dense: the detections.
+        sequence: the ``sequence`` column's value.
+    """
+    rows, joints = np.nonzero(dense.valid & np.isfinite(dense.keypoints_px).all(axis=-1))
+    order = np.lexsort((joints, dense.det_id[rows], dense.view[rows], dense.frame[rows]))
+    rows, joints = rows[order], joints[order]
+    return pd.DataFrame({
+        "sequence": np.full(len(rows), sequence, dtype=object),
+        "frame": dense.frame[rows].astype(np.int32),
+        "view": dense.view[rows].astype(np.int32),
+        "det_id": dense.det_id[rows].astype(np.int32),
+        "joint": np.asarray(CANONICAL_JOINTS, dtype=object)[joints],
+        "x_px": dense.keypoints_px[rows, joints, 0],
+        "y_px": dense.keypoints_px[rows, joints, 1],
+        "score": dense.scores[rows, joints],
+    })
