@@ -275,6 +275,8 @@ def main() -> None:
                         "(default: the calibration's, k1); e.g. pinhole")
     parser.add_argument("--principal-point", default=None, choices=("centre", "estimate", "auto"),
                         help="the calibration's principal point setting (default: its own, centre)")
+    parser.add_argument("--max-k1-std", type=float, default=None,
+                        help="the calibration's lens_max_k1_std (default: its own)")
     parser.add_argument("--oracle-sync", action="store_true",
                         help="feed the calibration the detections put on the reference clock with the TRUE time offsets")
     parser.add_argument("--interpolate", action="store_true",
@@ -289,6 +291,8 @@ def main() -> None:
         lens["lens_models"] = tuple(m.strip() for m in args.lens.split(","))
     if args.principal_point:
         lens["principal_point"] = args.principal_point
+    if args.max_k1_std is not None:
+        lens["lens_max_k1_std"] = args.max_k1_std
     # the modes never mix their results
     suffix = ("_oracle_sync" if args.oracle_sync else "") + ("_interpolated" if args.interpolate else "") + "".join(
         f"_{k}_{'-'.join(v) if isinstance(v, tuple) else v}" for k, v in lens.items())

@@ -135,7 +135,7 @@ def scene_config(index: int, seed: int, views: int | None = None):
 _WORKER: dict = {}
 
 
-def _init_worker(lifter_specs: list[str], repair: bool = True, limbs: bool = True) -> None:
+def _init_worker(lifter_specs: list[str], repair: bool = True, limbs: bool = True, lens: dict | None = None) -> None:
     import torch
 
     from humancal.body import BodyModel
@@ -151,6 +151,7 @@ def _init_worker(lifter_specs: list[str], repair: bool = True, limbs: bool = Tru
         lifters.append((int(checkpoint["config"]["seed"]), load_lifter(checkpoint)))
     _WORKER["lifters"] = lifters
     _WORKER["repair"] = repair
+    _WORKER["lens"] = lens or {}
     _WORKER["limbs"] = limbs
 
 
@@ -176,7 +177,8 @@ def run_scene(index: int, seed: int, views: int | None = None) -> dict:
     scene_row["lift_s"] = time.perf_counter() - clock
     sizes = [(c.width_px, c.height_px) for c in scene.rig]
     result = calibrate_scene(dense, lifted, sizes, ExtrinsicsConfig(repair_views=_WORKER["repair"],
-                                                                     scale_from_limbs=_WORKER["limbs"]), scene_row)
+                                                                     scale_from_limbs=_WORKER["limbs"],
+                                                                     **_WORKER["lens"]), scene_row)
     if result is None:
         return {"scene": scene_row, "views": []}
     fields, views = score_calibration(result, list(scene.rig), index, scene_row["far_views"])
@@ -309,6 +311,8 @@ def main() -> None:
                         help="score the views' agreement but place no view again (the calibration before the repair)")
     parser.add_argument("--views", type=int, default=None,
                         help="every scene gets this many views instead of the drawn number (e.g. 31)")
+    parser.add_argument("--max-k1-std", type=float, default=None,
+                        help="the calibration's lens_max_k1_std (default: its own)")
     args = parser.parse_args()
     specs = [s.strip() for s in args.lifters.split(",") if s.strip()]
     for spec in specs:
@@ -320,7 +324,8 @@ def main() -> None:
     todo = [i for i in indices if not (folder / f"scene_{i:04d}.json").exists()]
     print(f"{len(indices) - len(todo)} scenes already done in {folder}; {len(todo)} to run", flush=True)
     run_jobs([(i, args.seed, str(folder), args.views) for i in todo], _run_and_store, _init_worker,
-             (specs, not args.no_repair, not args.scale_from_lifted), args.jobs)
+             (specs, not args.no_repair, not args.scale_from_lifted,
+              {} if args.max_k1_std is None else {"lens_max_k1_std": args.max_k1_std}), args.jobs)
     results = [json.loads((folder / f"scene_{i:04d}.json").read_text()) for i in indices]
     scenes = pd.DataFrame([r["scene"] for r in results])
     views = pd.DataFrame([v for r in results for v in r["views"]])

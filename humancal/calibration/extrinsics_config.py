@@ -86,6 +86,8 @@ class ExtrinsicsConfig(Config):
         principal_point: ``"auto"`` (estimated when held-out frames support it), ``"centre"`` (the image centre,
             or the known principal point) or ``"estimate"``.
         lens_min_gain: relative decrease of the held-out reprojection score a richer lens needs to be taken.
+        lens_max_k1_std, lens_min_k1_sigma: a view keeps its estimated k1 only where its std is at most
+            ``lens_max_k1_std`` and k1 lies at least ``lens_min_k1_sigma`` stds from 0; other views are pinholes.
     """
 
     rotation_threshold_deg: float = field(default=10.0, metadata=in_range(0, 90, low_open=True, high_open=True))
@@ -121,6 +123,8 @@ class ExtrinsicsConfig(Config):
     lens_models: tuple[str, ...] = ("k1",)
     principal_point: str = "centre"
     lens_min_gain: float = field(default=0.02, metadata=in_range(0, 1, high_open=True))
+    lens_max_k1_std: float = field(default=0.25, metadata=positive())
+    lens_min_k1_sigma: float = field(default=2.0, metadata=at_least(0))
 
     def agreement(self) -> AgreementConfig:
         """The thresholds of the views' agreement."""

@@ -101,7 +101,7 @@ def _heldout(fit: Fit, start: BundleResult, groups: list[np.ndarray], folds: np.
 
 def choose_lens(fit: Fit, ba: BundleResult, groups: list[np.ndarray], frames: np.ndarray, *, models=LENS_MODELS,
                 principal_point: str = "auto", min_gain: float = 0.02, min_groups: int = 12,
-                max_k1_std: float = 0.05, min_k1_sigma: float = 2.0) -> tuple[BundleResult, LensChoice]:
+                max_k1_std: float = 0.25, min_k1_sigma: float = 2.0) -> tuple[BundleResult, LensChoice]:
     """The lens the capture supports (see the module docstring), adjusted on every group.
 
     Args:
@@ -242,7 +242,8 @@ def lens_step(ba, groups, detections, lifted_as_given, pp, bounds, f0, prior_rel
     fit = lens_fit(detections, lifted, pp, bounds, f0, prior_rel, config, hold_lens_views=known_views)
     with_lens, lens = choose_lens(fit, ba, groups, detections.frame[[g[0] for g in groups]],
                                   models=config.lens_models, principal_point=config.principal_point,
-                                  min_gain=config.lens_min_gain)
+                                  min_gain=config.lens_min_gain, max_k1_std=config.lens_max_k1_std,
+                                  min_k1_sigma=config.lens_min_k1_sigma)
     if lens.pinhole_at_centre:
         return ba, lens, np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
     pp_lens = with_lens.principal_point_px.copy()
