@@ -134,6 +134,8 @@ class ExtrinsicsSettings(dg.Config):
     lens_models: list[str] = library_field(_E, "lens_models")
     principal_point: str = library_field(_E, "principal_point")
     lens_min_gain: float = library_field(_E, "lens_min_gain")
+    lens_max_k1_std: float = library_field(_E, "lens_max_k1_std")
+    lens_min_k1_sigma: float = library_field(_E, "lens_min_k1_sigma")
 
     def to_library(self) -> ExtrinsicsConfig:
         """The library's settings (validated there: a bad value raises ``ValueError`` naming the field)."""
