@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from humancal.formats.detections.table import sort_detections
 from humancal.sync.interpolate import view_at_times
 from humancal.sync.offsets import per_view_fps
 from humancal.tables.detections import dense_to_detections, detections_to_dense
@@ -138,5 +139,5 @@ def _interpolated(detections: pd.DataFrame, offsets: np.ndarray, rates: np.ndarr
             residual[v] = float(np.abs(at.remainder_frames).max()) * rates[0] / rates[v]
         if len(at.detections):
             parts.append(dense_to_detections(at.detections, str(sequences[0])))
-    out = pd.concat(parts, ignore_index=True).astype(detections.dtypes.to_dict())
+    out = sort_detections(pd.concat(parts, ignore_index=True).astype(detections.dtypes.to_dict()))
     return AppliedOffsets(out, residual, dropped, interpolated)

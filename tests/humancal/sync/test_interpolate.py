@@ -167,3 +167,15 @@ def test_a_capture_with_given_offsets_is_interpolated_and_says_so():
     _, nearest = synchronise_views(table, ["a", "b"], fps=None, view_fps=(), unsynced=False,
                                    time_offsets_s=(("b", -2.3 / 30),), option_names=names, interpolate=False)
     assert nearest.interpolated == () and "interpolated" not in nearest.view_text(1)
+
+
+def test_a_view_without_detections_and_an_empty_capture_pass_through():
+    table = _capture([30.0, 30.0, 30.0], [0.0, 0.01, 0.02], [6, 6, 6])
+    table = table[table["view"] != 1].reset_index(drop=True)
+    applied = apply_time_offsets(table, [0.0, 0.01, 0.02], 30.0, interpolate=True)
+    assert set(applied.detections["view"]) == {0, 2}
+    assert applied.interpolated[1] == 0 and applied.dropped_frames[1] == 0
+    empty = apply_time_offsets(table.iloc[:0], [0.0, 0.01, 0.02], 30.0, interpolate=True)
+    assert len(empty.detections) == 0 and list(empty.detections.columns) == list(table.columns)
+    at = view_at_times(detections_to_dense(table), 1, np.arange(6.0))
+    assert len(at.detections) == 0 and len(at.used_frames) == 0
