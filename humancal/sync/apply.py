@@ -39,8 +39,8 @@ class AppliedOffsets:
     """Detections on the reference clock.
 
     Attributes:
-        detections: the canonical ``detections`` table with ``frame`` on view 0's clock (rows in the input's order,
-            the dropped ones left out).
+        detections: the canonical ``detections`` table with ``frame`` on view 0's clock (nearest frame: rows in the
+            input's order, the dropped ones left out; interpolated: sorted by frame, view, det_id and joint).
         residual_frames: (V,) the largest |remainder| of a kept detection taken from its nearest frame, reference
             frames (0 for a renumbering, and for views whose every detection was interpolated).
         dropped_frames: (V,) frames with detections that went into no kept detection: outside the reference range,
