@@ -27,9 +27,8 @@ import numpy as np
 import pandas as pd
 
 from humancal.formats.detections.table import sort_detections
-from humancal.sync.interpolate import view_at_times
+from humancal.sync.interpolate import views_at_times
 from humancal.sync.offsets import per_view_fps
-from humancal.tables.detections import dense_to_detections, detections_to_dense
 
 __all__ = ["AppliedOffsets", "apply_time_offsets"]
 
@@ -118,26 +117,19 @@ def _interpolated(detections: pd.DataFrame, offsets: np.ndarray, rates: np.ndarr
     """:func:`apply_time_offsets` with ``interpolate``: view 0 as it is, every other view at view 0's frame times
     ``0 .. last``."""
     V = len(offsets)
-    sequences = detections["sequence"].unique()
-    if len(sequences) > 1:
-        raise ValueError(f"detections: expected one sequence, got {sorted(map(str, sequences))}")
-    dense = detections_to_dense(detections)
+    reference = np.arange(last + 1, dtype=np.float64)
+    view = detections["view"].to_numpy()
+    frame = detections["frame"].to_numpy()
+    filmed = {v: np.unique(frame[view == v]) for v in range(1, V)}
+    others, per_view = views_at_times(detections, {
+        v: ((reference / rates[0] + offsets[0]) - offsets[v]) * rates[v] for v in range(1, V) if len(filmed[v])})
     residual = np.zeros(V)
     dropped = np.zeros(V, dtype=np.int64)
     interpolated = np.zeros(V, dtype=np.int64)
-    parts = [detections.loc[detections["view"].to_numpy() == 0]]
-    reference = np.arange(last + 1, dtype=np.float64)
-    for v in range(1, V):
-        filmed = np.unique(dense.frame[dense.view == v])
-        if not len(filmed):
-            continue
-        source = ((reference / rates[0] + offsets[0]) - offsets[v]) * rates[v]
-        at = view_at_times(dense, v, source)
-        dropped[v] = len(np.setdiff1d(filmed, at.used_frames))
+    for v, at in per_view.items():
+        dropped[v] = len(np.setdiff1d(filmed[v], at.used_frames))
         interpolated[v] = int(at.interpolated.sum())
         if len(at.remainder_frames):
             residual[v] = float(np.abs(at.remainder_frames).max()) * rates[0] / rates[v]
-        if len(at.detections):
-            parts.append(dense_to_detections(at.detections, str(sequences[0])))
-    out = sort_detections(pd.concat(parts, ignore_index=True).astype(detections.dtypes.to_dict()))
+    out = sort_detections(pd.concat([detections.loc[view == 0], others], ignore_index=True))
     return AppliedOffsets(out, residual, dropped, interpolated)

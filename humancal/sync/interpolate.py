@@ -20,15 +20,18 @@ whose chord is off it by far less than a detector's noise.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
+from humancal.formats.detections.table import sort_detections
 from humancal.keypoints import FLIP_INDEX
 from humancal.sync.tracks import link_view_tracks
-from humancal.tables.detections import DenseDetections
+from humancal.tables.detections import DenseDetections, dense_to_detections, detections_to_dense
 
-__all__ = ["ViewAtTimes", "view_at_times"]
+__all__ = ["ViewAtTimes", "view_at_times", "views_at_times"]
 
 _ON_FRAME = 1e-6
 """A time within this many of the view's frames from a frame is that frame."""
@@ -108,6 +111,33 @@ def view_at_times(dense: DenseDetections, view: int, source_frames: np.ndarray) 
     remainder = np.where(blend, 0.0, fraction)
     remainder[np.abs(remainder) < _ON_FRAME] = 0.0
     return ViewAtTimes(out, remainder, blend, used)
+
+
+def views_at_times(detections: pd.DataFrame, source_frames: Mapping[int, np.ndarray]
+                   ) -> tuple[pd.DataFrame, dict[int, ViewAtTimes]]:
+    """Several views of one capture at times of their own clocks (:func:`view_at_times` per view), as one table.
+
+    Args:
+        detections: canonical ``detections`` table of one sequence, each view's ``frame`` on its own clock.
+        source_frames: view -> (M,) for each time asked for, the view's own frame at that time (NaN: none asked).
+
+    Returns:
+        ``(table, per_view)``: the canonical ``detections`` of those views with ``frame`` the index of the time
+        (sorted by frame, view, det_id and joint; the input's dtypes), and each view's :class:`ViewAtTimes`.
+
+    Raises:
+        ValueError: the table holds more than one sequence.
+    """
+    sequences = detections["sequence"].unique()
+    if len(sequences) > 1:
+        raise ValueError(f"detections: expected one sequence, got {sorted(map(str, sequences))}")
+    dense = detections_to_dense(detections)
+    per_view = {v: view_at_times(dense, v, frames) for v, frames in source_frames.items()}
+    parts = [dense_to_detections(at.detections, str(sequences[0])) for at in per_view.values() if len(at.detections)]
+    if not parts:
+        return detections.iloc[:0].copy(), per_view
+    table = pd.concat(parts, ignore_index=True).astype(detections.dtypes.to_dict())
+    return sort_detections(table), per_view
 
 
 def _lookup(track: np.ndarray, frames: np.ndarray, want_track: np.ndarray, want_frame: np.ndarray) -> np.ndarray:

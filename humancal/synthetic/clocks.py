@@ -187,16 +187,11 @@ def to_reference_frames(detections: pd.DataFrame, fps: np.ndarray, time_offset_s
 def _interpolated(detections: pd.DataFrame, fps: np.ndarray, offset: np.ndarray, reference_fps: float,
                   last: int) -> pd.DataFrame:
     """:func:`to_reference_frames` with ``interpolate``: every view at the reference frames ``0 .. last``."""
-    from humancal.sync.interpolate import view_at_times
-    from humancal.tables.detections import dense_to_detections, detections_to_dense
+    from humancal.sync.interpolate import views_at_times
 
-    if not len(detections):
-        return detections.copy()
-    dense = detections_to_dense(detections)
     times = np.arange(last + 1) / reference_fps
-    parts = [dense_to_detections(view_at_times(dense, v, (times - offset[v]) * fps[v]).detections,
-                                 str(detections["sequence"].iloc[0])) for v in np.unique(dense.view)]
-    return pd.concat(parts, ignore_index=True).astype(detections.dtypes.to_dict())
+    views = np.unique(detections["view"].to_numpy())
+    return views_at_times(detections, {int(v): (times - offset[v]) * fps[v] for v in views})[0]
 
 
 def started_by_hand(detections: pd.DataFrame, starts, num_frames: int) -> pd.DataFrame:
