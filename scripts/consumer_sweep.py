@@ -136,6 +136,7 @@ def _lens_rows(estimated, truth, clocks: pd.DataFrame, offsets_s: np.ndarray) ->
             "pp_offset_true_px": float(np.linalg.norm(pp_true - centre)),
             "pp_estimated": bool(np.linalg.norm(pp_est - centre) > _CENTRE_TOL_PX),
             "pp_error_px": float(np.linalg.norm(pp_est - pp_true)),
+            "pp_error_x_px": float(pp_est[0] - pp_true[0]), "pp_error_y_px": float(pp_est[1] - pp_true[1]),
             "fps": fps, "time_offset_true_s": offset, "time_offset_est_s": float(offsets_s[v]),
             "time_offset_error_frames": float(error_frames),
             "time_offset_exact": bool(error_frames <= 0.5) if np.isfinite(error_frames) else None,

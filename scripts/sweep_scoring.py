@@ -132,6 +132,8 @@ def score_calibration(result, true_cameras: list, index: int, far_views: int) ->
             "far": bool(v >= len(true_cameras) - far_views),
             "people_loo_sigma": float(per_view["people_loo_sigma"].iloc[v]),
             "bundle_groups": int((diag.groups["view"] == v).sum()),
+            **{name: float(per_view[name].iloc[v]) if name in per_view else float("nan")
+               for name in ("k1_std", "cx_std_px", "cy_std_px")},
             "silent_failure": bool(bad and not failed),
         })
     return fields, views

@@ -85,14 +85,14 @@ def _consumer_scene(seed: int, body, noise=None):
         "fps": "/".join(f"{f:g}" for f in clocks["fps"])}
 
 
-def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str = "studio", tentative: bool = True
-              ) -> dict:
-    from humancal.sync import estimate_time_offsets
+def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str = "studio", tentative: bool = True,
+              signal: str = "lifted") -> dict:
+    from humancal.sync import SyncConfig, estimate_time_offsets
 
     scene, detections, fps, truth_s, row = (_consumer_scene if clocks == "consumer" else _studio_scene)(seed, body)
     truth = truth_s * fps[0]  # in reference frames (view 0's)
     start = time.perf_counter()
-    estimate = estimate_time_offsets(detections, fps, lifter=lifter)
+    estimate = estimate_time_offsets(detections, fps, lifter=lifter, config=SyncConfig(signal=signal))
     seconds = time.perf_counter() - start
     offsets, used = estimate.offset_frames, np.array([s == "ok" for s in estimate.status])
     if with_cameras:
@@ -167,6 +167,8 @@ def main() -> None:
     parser.add_argument("--no-tentative", dest="tentative", action="store_false",
                         help="with --with-cameras: ambiguous views are refused, not given a tentative offset for the "
                              "cameras to confirm (as humancal add did before 2026-11-29)")
+    parser.add_argument("--signal", choices=("lifted", "2d", "both"), default="lifted",
+                        help="the pose signal the offsets are estimated from (SyncConfig.signal)")
     args = parser.parse_args()
     seeds = [args.seed * 100_000 + i for i in range(args.scenes)]
 
@@ -188,7 +190,7 @@ def main() -> None:
             checkpoint = (torch.load(args.lifter, map_location="cpu", weights_only=True) if args.lifter
                           else shipped_checkpoint())
             body, lifter = BodyModel(), load_lifter(checkpoint)
-        row = run_scene(seed, body, lifter, args.with_cameras, args.clocks, args.tentative)
+        row = run_scene(seed, body, lifter, args.with_cameras, args.clocks, args.tentative, args.signal)
         done[seed] = row
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")

@@ -163,7 +163,7 @@ def bundle_adjust(
     tolerance: float = 1e-6, camera_tolerance: float = 2e-5, hold_views: Sequence[int] = (), lens: str = "pinhole",
     principal_point: bool = False, lens_start: np.ndarray | None = None,
     lens_prior_std: tuple[float, float, float] = (0.25, 0.1, 50.0), hold_lens_views: Sequence[int] = (),
-    adjust_cameras: bool = True,
+    hold_radial_views: Sequence[int] = (), adjust_cameras: bool = True,
 ) -> BundleResult:
     """Refine focal lengths, rotations, translations and the groups' keypoints (see the module docstring).
 
@@ -200,6 +200,8 @@ def bundle_adjust(
             ``principal_point_px``); None: zeros. Held parameters keep these values.
         lens_prior_std: std of the zero-mean priors on k1, on k2 and on the principal point's offset (pixels).
         hold_lens_views: views whose lens parameters stay at ``lens_start`` (e.g. known cameras).
+        hold_radial_views: views whose radial terms (k1, k2) alone stay at ``lens_start`` (a view kept a pinhole
+            whose principal point is still estimated).
         adjust_cameras: False holds every camera and solves the groups' keypoints (and scales) alone (e.g. to score
             held-out groups with cameras fitted on others).
 
@@ -227,7 +229,7 @@ def bundle_adjust(
     cams = start_cameras(prob, fx0, fy0, t_init, np.log(bounds), lens_start)
     held = np.zeros(V, bool)
     held[list(hold_views)] = True
-    free = free_parameters(prob, held, adjust_cameras, lens, principal_point, hold_lens_views)
+    free = free_parameters(prob, held, adjust_cameras, lens, principal_point, hold_lens_views, hold_radial_views)
     outcome = _iterate(prob, (cams, R_init.copy(), setup.points, np.zeros(prob.G)), free, t_init, huber=huber,
                        max_iterations=max_iterations, tolerance=tolerance, camera_tolerance=camera_tolerance)
     return _result(setup, outcome, free, held, np.log(bounds), pp)

@@ -122,10 +122,10 @@ def start_cameras(prob: _Problem, fx0: np.ndarray, fy0: np.ndarray, t_init: np.n
 
 
 def free_parameters(prob: _Problem, held: np.ndarray, adjust_cameras: bool, lens: str, principal_point: bool,
-                     hold_lens_views: Sequence[int]) -> np.ndarray:
+                     hold_lens_views: Sequence[int], hold_radial_views: Sequence[int] = ()) -> np.ndarray:
     """(V, nc) which camera parameters move: none of the ``held`` views' (V,), nor the pose of the first view not
-    held (the world frame), nor the lens parameters the model or ``hold_lens_views`` fix; none at all without
-    ``adjust_cameras``."""
+    held (the world frame), nor the lens parameters the model or ``hold_lens_views`` fix, nor the radial terms of
+    ``hold_radial_views``; none at all without ``adjust_cameras``."""
     nf = _focal_count(prob)
     free = np.ones((prob.V, _camera_params(prob)), bool)
     if not adjust_cameras:
@@ -139,4 +139,5 @@ def free_parameters(prob: _Problem, held: np.ndarray, adjust_cameras: bool, lens
         moving = np.array([lens != "pinhole", lens == "k1k2", principal_point, principal_point])
         free[:, nf + 6 :] &= moving[None]
         free[list(hold_lens_views), nf + 6 :] = False
+        free[list(hold_radial_views), nf + 6 : nf + 8] = False
     return free

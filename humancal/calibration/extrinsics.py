@@ -212,7 +212,8 @@ class _Refined:
 
     Attributes:
         ba: the bundle adjustment (translations and keypoints scaled, metres).
-        lens, distortion, k1_std: the lens choice, (V, 5) OpenCV distortion and (V,) k1's std (NaN: pinhole).
+        lens, distortion, lens_std: the lens choice, (V, 5) OpenCV distortion and (V, 4) the std of k1, k2, cx_px,
+            cy_px (NaN where not estimated).
         pp: (V, 2) principal points, pixels.
         detections: the detections in the lens's pinhole images.
         repair: the view repair's outcome, its agreement the one of this rig.
@@ -222,7 +223,7 @@ class _Refined:
     ba: object
     lens: object
     distortion: np.ndarray
-    k1_std: np.ndarray
+    lens_std: np.ndarray
     pp: np.ndarray
     detections: DenseDetections
     repair: object
@@ -236,7 +237,7 @@ def _lens_and_scale(problem: Problem, ba, groups: list[np.ndarray], inputs: Repa
     config, lifted, f0, prior_rel = problem.config, problem.lifted, problem.f0, problem.prior_rel
     clock = time.perf_counter()
     with numerical_stage("lens"):
-        ba, lens, distortion, k1_std, pp, detections, repair = lens_step(ba, groups, problem.detections, lifted,
+        ba, lens, distortion, lens_std, pp, detections, repair = lens_step(ba, groups, problem.detections, lifted,
                                                                          problem.pp, problem.bounds, f0, prior_rel,
                                                                          config, sorted(known), inputs, repair)
     timings["lens"] = time.perf_counter() - clock
@@ -247,7 +248,7 @@ def _lens_and_scale(problem: Problem, ba, groups: list[np.ndarray], inputs: Repa
     if known:  # the known cameras set the world (and, two or more, its scale)
         with numerical_stage("anchoring to the known cameras"):
             ba = anchor_to_known(ba, known, adjust_any, groups)
-    return _Refined(ba, lens, distortion, k1_std, pp, detections, repair, scale)
+    return _Refined(ba, lens, distortion, lens_std, pp, detections, repair, scale)
 
 
 def _diagnostics(refined: _Refined, bundled, groups: list[np.ndarray], start, resected,
@@ -257,7 +258,7 @@ def _diagnostics(refined: _Refined, bundled, groups: list[np.ndarray], start, re
     (``world``: ``(floor, floor_problem, people)`` of :func:`_world_frame`), the regrouping and the scale."""
     ba, (floor, floor_problem, people) = refined.ba, world
     per_view = per_view_table(ba, intrinsics, start.pairs, start.f_linear, start.blind, resected, refined.distortion,
-                              refined.k1_std, refined.pp, refined.repair, config)
+                              refined.lens_std, refined.pp, refined.repair, config)
     return ExtrinsicsDiagnostics(
         per_view, pair_table(start.pairs, start.residual_deg), group_table(refined.detections, groups), floor,
         ba.inlier_fraction, timings, world_frame=("known_cameras" if known else "floor" if floor is not None

@@ -16,7 +16,7 @@ logger = logging.getLogger("humancal.calibration.extrinsics")
 
 
 def per_view_table(ba, intrinsics, pairs, f_linear: np.ndarray, blind: np.ndarray, resected: np.ndarray,
-                   distortion: np.ndarray, k1_std: np.ndarray, pp: np.ndarray, repair, config) -> pd.DataFrame:
+                   distortion: np.ndarray, lens_std: np.ndarray, pp: np.ndarray, repair, config) -> pd.DataFrame:
     """One row per view: its focal lengths along the way and their status, its lens and principal point, its
     rotation edges and its agreement with the other views; a warning names the poorly constrained focal lengths.
 
@@ -26,7 +26,8 @@ def per_view_table(ba, intrinsics, pairs, f_linear: np.ndarray, blind: np.ndarra
         pairs: the pair rotations (their support counts the rotation edges).
         f_linear, blind, resected: (V,) the linear focal lengths, pixels; the views it could not see; those placed
             by a resection.
-        distortion: (V, 5) the lens; k1_std: (V,) its std (NaN: kept a pinhole); pp: (V, 2) principal points, pixels.
+        distortion: (V, 5) the lens; lens_std: (V, 4) the std of k1, k2, cx_px, cy_px (NaN: not estimated, a pinhole
+            or a centred principal point); pp: (V, 2) principal points, pixels.
         repair: the view agreement (:func:`~humancal.calibration.view_repair.check_and_repair_views`).
         config: the :class:`~humancal.calibration.extrinsics_config.ExtrinsicsConfig`.
     """
@@ -49,10 +50,12 @@ def per_view_table(ba, intrinsics, pairs, f_linear: np.ndarray, blind: np.ndarra
                                           np.where(blind, "other_views+bundle", "linear+bundle"))),
         "bundle_status": ba.view_status,
         "k1": distortion[:, 0],
-        "k1_std": k1_std,
+        "k1_std": lens_std[:, 0],
         "k2": distortion[:, 1],
         "cx_px": pp[:, 0],
         "cy_px": pp[:, 1],
+        "cx_std_px": lens_std[:, 2],
+        "cy_std_px": lens_std[:, 3],
         "reprojection_rms_px": ba.reprojection_rms_px,
         "rotation_edges": edges,
         "agreement": repair.final["verdict"].to_numpy(),

@@ -183,7 +183,8 @@ def lens_fit(detections: DenseDetections, lifted_cam: LiftedPoses, principal_poi
     """The calibration's bundle adjustment as a :data:`Fit`: the settings of ``config``
     (:class:`~humancal.calibration.ExtrinsicsConfig`), the focal priors and bounds, the lifted poses in camera
     frames (``lifted_cam``), the principal points given (V, 2, pixels) that the lens's offsets start from; the lens
-    parameters of ``hold_lens_views`` (known cameras: their detections are already undistorted) stay zero."""
+    parameters of ``hold_lens_views`` (known cameras: their detections are already undistorted) stay zero, and the
+    radial terms of a fit's ``hold_more`` views (kept pinholes; their principal points still move when estimated)."""
     pp = np.asarray(principal_point_px, dtype=np.float64)
 
     def fit(groups, start: BundleResult, *, lens: str, principal_point: bool, adjust_cameras: bool = True,
@@ -193,14 +194,16 @@ def lens_fit(detections: DenseDetections, lifted_cam: LiftedPoses, principal_poi
             lens_start[:, :2] = start.distortion[:, :2]
         if start.principal_point_px is not None:
             lens_start[:, 2:] = start.principal_point_px - pp
-        held = sorted(set(hold_lens_views) | set(hold_more))
+        held = sorted(hold_lens_views)
+        lens_start[list(held)] = 0.0
+        lens_start[list(hold_more), :2] = 0.0  # kept pinholes: radial terms held at 0, the principal point as chosen
         return bundle_adjust(
             detections, lifted_cam, groups, start.points_world_m, start.fx_px, start.fy_px, pp,
             start.R_cam_from_world, start.t_cam_from_world_m, square_pixels=config.square_pixels,
             focal_prior_px=focal_prior_px, focal_prior_rel_std=focal_prior_rel_std, shape_std_m=config.shape_std_m,
             group_scale_std=config.person_scale_std, focal_bounds_px=focal_bounds_px,
             max_iterations=config.bundle_iterations, lens=lens, principal_point=principal_point,
-            lens_start=np.where(np.isin(np.arange(len(pp)), held)[:, None], 0.0, lens_start), hold_lens_views=held,
+            lens_start=lens_start, hold_lens_views=held, hold_radial_views=tuple(hold_more),
             adjust_cameras=adjust_cameras)
 
     return fit
@@ -232,8 +235,8 @@ def lens_step(ba, groups, detections, lifted_as_given, pp, bounds, f0, prior_rel
             inputs, repair: the view check's inputs and result (:mod:`.view_repair`).
 
     Returns:
-        ``(ba, lens, distortion (V, 5), k1's std (V,; NaN: pinhole), principal points (V, 2), detections,
-        repair)``: the detections moved to
+        ``(ba, lens, distortion (V, 5), lens_std (V, 4): the std of k1, k2, cx_px, cy_px (NaN where not estimated),
+        principal points (V, 2), detections, repair)``: the detections moved to
         the pinhole images of the lens, the repair's final agreement the one of the returned rig.
     """
     V = len(ba.fx_px)
@@ -245,7 +248,7 @@ def lens_step(ba, groups, detections, lifted_as_given, pp, bounds, f0, prior_rel
                                   min_gain=config.lens_min_gain, max_k1_std=config.lens_max_k1_std,
                                   min_k1_sigma=config.lens_min_k1_sigma)
     if lens.pinhole_at_centre:
-        return ba, lens, np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
+        return ba, lens, np.zeros((V, 5)), np.full((V, 4), np.nan), pp, detections, repair
     pp_lens = with_lens.principal_point_px.copy()
     seen = undistorted_detections(detections, intrinsic_matrices(with_lens.fx_px, with_lens.fy_px, pp_lens[:, 0], pp_lens[:, 1]), with_lens.distortion)
     _, _, scored = check_and_repair_views(with_lens, groups, replace(
@@ -256,6 +259,6 @@ def lens_step(ba, groups, detections, lifted_as_given, pp, bounds, f0, prior_rel
         reason = f"{lens.reason}; not taken: views {views} no longer agree with the others with it"
         logger.warning("lens: %s", reason)
         return ba, replace(lens, model="pinhole", principal_point="centre", reason=reason), \
-            np.zeros((V, 5)), np.full(V, np.nan), pp, detections, repair
-    return (with_lens, lens, with_lens.distortion, with_lens.lens_std[:, 0], pp_lens, seen,
+            np.zeros((V, 5)), np.full((V, 4), np.nan), pp, detections, repair
+    return (with_lens, lens, with_lens.distortion, with_lens.lens_std, pp_lens, seen,
             replace(repair, final=scored.final))

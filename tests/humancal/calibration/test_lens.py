@@ -43,12 +43,33 @@ def test_a_barrel_lens_is_recovered_and_the_rig_with_it(barrel_scene):
     assert (lens.diagnostics.per_view["agreement"] == "ok").all()
 
 
-def test_pinhole_views_stay_pinholes(body_model):
-    scene = generate_scene(preset("demo", num_frames=60), body_model, sequence="pinhole")
-    result = _calibrate(scene)
-    assert (result.diagnostics.per_view["k1"] == 0.0).all()
+@pytest.fixture(scope="module")
+def pinhole_scene(body_model):
+    """4 people, 5 pinhole views at the image centre, 60 frames."""
+    return generate_scene(preset("demo", num_frames=60), body_model, sequence="pinhole")
+
+
+def test_pinhole_views_stay_pinholes(pinhole_scene):
+    result = _calibrate(pinhole_scene)
+    per_view = result.diagnostics.per_view
+    assert (per_view["k1"] == 0.0).all()
     assert all(not np.any(c.distortion) for c in result.cameras)
     assert "kept as pinholes" in result.diagnostics.lens.reason
+    assert per_view[["cx_std_px", "cy_std_px"]].isna().all().all()  # the principal point was not estimated
+
+
+def test_a_view_kept_a_pinhole_still_estimates_its_principal_point(pinhole_scene):
+    """With the principal point estimated, the views whose k1 is 0 hold their radial terms only: each principal point
+    moves and has its std in the per-view table."""
+    result = _calibrate(pinhole_scene, ExtrinsicsConfig(principal_point="estimate"))
+    per_view = result.diagnostics.per_view
+    assert result.diagnostics.lens.principal_point == "estimated"
+    assert (per_view["k1"] == 0.0).all(), per_view["k1"]
+    centre = np.array([[c.width_px / 2.0, c.height_px / 2.0] for c in pinhole_scene.rig])
+    moved = np.hypot(per_view["cx_px"] - centre[:, 0], per_view["cy_px"] - centre[:, 1])
+    assert (moved > 0.01).all(), moved
+    std = per_view[["cx_std_px", "cy_std_px"]].to_numpy()
+    assert np.isfinite(std).all() and (std > 0).all() and (std < 50.0).all(), std  # below the 50 px prior's
 
 
 def test_frame_folds_alternate_blocks_of_consecutive_frames():
