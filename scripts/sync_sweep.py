@@ -86,7 +86,7 @@ def _consumer_scene(seed: int, body, noise=None):
 
 
 def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str = "studio", tentative: bool = True,
-              signal: str = "lifted") -> dict:
+              signal: str = "lifted", check_interpolate: bool = True) -> dict:
     from humancal.sync import SyncConfig, estimate_time_offsets
 
     scene, detections, fps, truth_s, row = (_consumer_scene if clocks == "consumer" else _studio_scene)(seed, body)
@@ -96,7 +96,8 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
     seconds = time.perf_counter() - start
     offsets, used = estimate.offset_frames, np.array([s == "ok" for s in estimate.status])
     if with_cameras:
-        offsets, used, checked = _checked_with_cameras(detections, estimate, scene.rig, lifter, tentative)
+        offsets, used, checked = _checked_with_cameras(detections, estimate, scene.rig, lifter, tentative,
+                                                       check_interpolate)
         row |= checked
     used = used[1:]
     error = (offsets - truth)[1:]
@@ -112,7 +113,8 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
                   "seconds": round(seconds, 2)}
 
 
-def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True) -> tuple[np.ndarray, np.ndarray, dict]:
+def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True, interpolate=True
+                          ) -> tuple[np.ndarray, np.ndarray, dict]:
     """What ``humancal add --unsynced`` does after the estimate (``humancal.sync.capture.synchronise_views``): the
     views with an offset (``ok``, ``unchecked``, tentative) put on one clock, calibrated from the people and each
     offset checked and moved (:func:`humancal.sync.capture.calibrate_and_check`). Returns the offsets (reference frames;
@@ -134,7 +136,8 @@ def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True) -> 
     kept["view"] = kept["view"].map({v: i for i, v in enumerate(placed)})
     sizes = [(rig[v].width_px, rig[v].height_px) for v in placed]
     try:
-        check = calibrate_and_check(kept, offset_s[placed], estimate.fps[placed], sizes, lifter)
+        check = calibrate_and_check(kept, offset_s[placed], estimate.fps[placed], sizes, lifter,
+                                    interpolate=interpolate)
     except Exception as error:  # noqa: BLE001 - the sweep records why a scene could not be checked
         return offsets, used, {"camera_check": f"{type(error).__name__}: {error}"}
     verdict = np.array(check.status)
@@ -167,6 +170,9 @@ def main() -> None:
     parser.add_argument("--no-tentative", dest="tentative", action="store_false",
                         help="with --with-cameras: ambiguous views are refused, not given a tentative offset for the "
                              "cameras to confirm (as humancal add did before 2026-11-29)")
+    parser.add_argument("--check-nearest", dest="check_interpolate", action="store_false",
+                        help="with --with-cameras: the check takes each view's nearest frames, not its people "
+                             "interpolated at view 0's frame times (as before 2026-11-29)")
     parser.add_argument("--signal", choices=("lifted", "2d", "both"), default="lifted",
                         help="the pose signal the offsets are estimated from (SyncConfig.signal)")
     args = parser.parse_args()
@@ -190,7 +196,8 @@ def main() -> None:
             checkpoint = (torch.load(args.lifter, map_location="cpu", weights_only=True) if args.lifter
                           else shipped_checkpoint())
             body, lifter = BodyModel(), load_lifter(checkpoint)
-        row = run_scene(seed, body, lifter, args.with_cameras, args.clocks, args.tentative, args.signal)
+        row = run_scene(seed, body, lifter, args.with_cameras, args.clocks, args.tentative, args.signal,
+                        args.check_interpolate)
         done[seed] = row
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")

@@ -165,7 +165,7 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
         source, status, confidence = "estimated", estimate.status, estimate.confidence
         if image_sizes_px is not None:
             offsets, camera_check, check = _checked_with_cameras(detections, offsets, rates, names, image_sizes_px,
-                                                                 lifter, option_names)
+                                                                 lifter, option_names, interpolate)
             confirmed = [v for v in unchecked + tentative if check is not None and check.confirms(v)]
             _refuse_unusable(estimate, names, option_names, config, sorted(set(unchecked) - set(confirmed)),
                              ambiguous=sorted(set(tentative) - set(confirmed)), cameras_tried=True)
@@ -189,7 +189,7 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
 
 def calibrate_and_check(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray,
                         image_sizes_px: Sequence[tuple[int, int]], lifter,
-                        view_names: Sequence[str] | None = None) -> CameraCheck:
+                        view_names: Sequence[str] | None = None, interpolate: bool = True) -> CameraCheck:
     """The views put on one clock with ``offsets_s``, their cameras calibrated from the people as the graph does
     (:func:`humancal.calibration.estimate_intrinsics`, :func:`~humancal.calibration.estimate_extrinsics`), and each
     offset checked with them (:func:`check_offsets_with_cameras`, a camera the calibration judges disagreeing
@@ -202,6 +202,8 @@ def calibrate_and_check(detections: pd.DataFrame, offsets_s: np.ndarray, rates: 
         image_sizes_px: (V,) ``(width, height)`` of each view's images.
         lifter: the :class:`humancal.lifter.Lifter` whose poses the calibration uses.
         view_names: (V,) names for the calibration's messages.
+        interpolate: each view's people blended at view 0's frame times (as the capture will be, so that a view
+            filming at another rate moves smoothly with each shift the check tries); False: their nearest frames.
 
     Raises:
         CalibrationError: the calibration failed.
@@ -210,7 +212,7 @@ def calibrate_and_check(detections: pd.DataFrame, offsets_s: np.ndarray, rates: 
     from humancal.lifter import lift_detections
     from humancal.tables.detections import detections_to_dense
 
-    dense = detections_to_dense(apply_time_offsets(detections, offsets_s, rates).detections)
+    dense = detections_to_dense(apply_time_offsets(detections, offsets_s, rates, interpolate=interpolate).detections)
     lifted = lift_detections(lifter, dense.keypoints_px, dense.scores)
     intrinsics = estimate_intrinsics(dense, lifted, list(image_sizes_px), IntrinsicsConfig(missing_upright="defer"))
     calibrated = estimate_extrinsics(dense, lifted, intrinsics,
@@ -220,8 +222,8 @@ def calibrate_and_check(detections: pd.DataFrame, offsets_s: np.ndarray, rates: 
 
 
 def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray, names: Sequence[str],
-                          image_sizes_px: Sequence[tuple[int, int]], lifter, option_names: Mapping[str, str]
-                          ) -> tuple[np.ndarray, tuple[str, ...], CameraCheck | None]:
+                          image_sizes_px: Sequence[tuple[int, int]], lifter, option_names: Mapping[str, str],
+                          interpolate: bool = True) -> tuple[np.ndarray, tuple[str, ...], CameraCheck | None]:
     """The estimated offsets after :func:`calibrate_and_check`, what it did per view (the words of
     :attr:`CaptureSync.camera_check`) and the check (None: the calibration failed).
 
@@ -232,7 +234,7 @@ def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates
 
     log.info("checking the time offsets against cameras calibrated from the people ...")
     try:
-        check = calibrate_and_check(detections, offsets_s, rates, image_sizes_px, lifter, names)
+        check = calibrate_and_check(detections, offsets_s, rates, image_sizes_px, lifter, names, interpolate)
     except CalibrationError as error:
         log.warning("the time offsets were not checked against cameras: the calibration failed (%s)", error)
         return offsets_s, (f"not checked ({type(error).__name__})",) * len(names), None

@@ -219,3 +219,27 @@ def test_seated_people_leave_add_refusing_with_the_offsets_in_doubt(body_model):
                           lifter_factory=lambda: lifter,
                           image_sizes_px=[(c.width_px, c.height_px) for c in scene.rig])
     assert "--time-offsets" in str(error.value) and "cam1=SECONDS" in str(error.value)
+
+
+def test_views_at_other_frame_rates_interpolated_agree_where_their_nearest_frames_are_unsure(body_model):
+    """View 0 films at 60 fps, others at 25 or 30: on view 0's clock by their nearest frames, a slower view repeats
+    a detection over two or three reference frames, each shift the check tries moves it by a whole frame of its own
+    or not at all, and the two halves of the capture place the views about a reference frame apart (unsure, though
+    the offsets are the true ones). Interpolated at view 0's frame times, they move smoothly and the check agrees
+    with every view within a fraction of a frame."""
+    from humancal.sync import apply_time_offsets
+    from humancal.synthetic import generate_scene, preset
+
+    scene = generate_scene(preset("demo", num_views=6, num_people=3, num_frames=240, seed=1, fps=60.0,
+                                  time_offset_range_s=(-0.5, 0.5), view_fps_choices=(25.0, 30.0, 60.0),
+                                  behaviour="mixed"), body_model, sequence="rates")
+    fps = scene.view_clocks["fps"].to_numpy()
+    assert fps[0] == 60.0 and (fps[1:] < 60.0).sum() >= 2, fps
+    offsets_s = scene.view_clocks["time_offset_s"].to_numpy() - scene.view_clocks["time_offset_s"].iloc[0]
+    checks = {interpolate: check_offsets_with_cameras(detections_to_dense(apply_time_offsets(
+        scene.detections, offsets_s, fps, interpolate=interpolate).detections), scene.rig)
+        for interpolate in (False, True)}
+    nearest, blended = checks[False], checks[True]
+    assert list(blended.status) == ["agrees"] * 6, (blended.status, blended.spread_frames)
+    assert np.abs(blended.shift).max() < 0.25, blended.shift
+    assert "unsure" in nearest.status and np.abs(nearest.shift).max() > 0.5, (nearest.status, nearest.shift)
