@@ -48,7 +48,10 @@ How (:func:`check_offsets_with_cameras`):
    ``--seed 1``) the views used one or more frames off were all seated people, 0.5-3.5 frames off; their halves
    were 0.84-5 frames apart, those of the views exact to the frame 0.06 apart (median; 4 of 115 above 0.75). On
    ``--seed 1`` of the consumer sweep two seated views 0.7 and 1.6 frames off had halves within 0.7 of each other,
-   in a capture where five of nine views were unsure: the rule for the whole capture.
+   in a capture where five of nine views were unsure: the rule for the whole capture. And when no view besides
+   view 0 is left ``"agrees"`` or ``"moved"``, the flat views are unsure too: nothing in the capture confirms the
+   motion's offsets. On the consumer sweep's ``--seed 0`` (people interpolated at view 0's frame times) a capture of
+   seated people had six flat views and three unsure, and four of the flat ones were used 0.2-2.2 frames off.
 
 Convention: ``shift_frames[v] = k`` says the view's frame ``n + k`` (on the reference clock, as the detections
 were synchronised) shows the reference instant ``n``; with its fraction ``sub_frame[v]``, its offset moves by
@@ -339,6 +342,8 @@ def check_offsets_with_cameras(detections: DenseDetections, cameras: CameraRig,
     if 2 * sum(unsure) >= max(1, sum(placed[1:])):  # the motion does not fix this capture's clock: none is trusted
         unsure = [bool(placed[v] and v) for v in range(V)]
     status = ["unsure" if unsure[v] else st for v, st in enumerate(status)]
+    if not any(st in ("agrees", "moved") for st in status[1:]):  # the cameras confirm no view: nor a flat one
+        status = ["unsure" if v and st == "flat" else st for v, st in enumerate(status)]
     for v in range(V):
         log.info("view %d: the cameras put its offset %+.2f frames from the estimate (%s, gain %.2f, level %.3f m, "
                  "halves %.2f frames apart)", v, -(shift[v] + fraction[v]), status[v], gain[v], level[v], spread[v])
