@@ -237,9 +237,9 @@ def _lens_and_scale(problem: Problem, ba, groups: list[np.ndarray], inputs: Repa
     config, lifted, f0, prior_rel = problem.config, problem.lifted, problem.f0, problem.prior_rel
     clock = time.perf_counter()
     with numerical_stage("lens"):
-        ba, lens, distortion, lens_std, pp, detections, repair = lens_step(ba, groups, problem.detections, lifted,
-                                                                         problem.pp, problem.bounds, f0, prior_rel,
-                                                                         config, sorted(known), inputs, repair)
+        ba, lens, distortion, lens_std, pp, detections, repair = lens_step(
+            ba, groups, problem.detections, lifted, problem.pp, problem.bounds, f0, prior_rel, config, sorted(known),
+            inputs, repair)
     timings["lens"] = time.perf_counter() - clock
     adjust_any = calibration_adjuster(detections, lifted, pp, problem.bounds, f0, prior_rel, config)  # lens's images
     scale, _ = people_scale_factor(ba.points_world_m) if config.scale_from_limbs else (1.0, 0)

@@ -186,8 +186,8 @@ class ExtrinsicsDiagnostics:
         scale_factor: the factor the world was scaled by after the bundle adjustment so that the people have a
             reference adult's limbs (1: ``scale_from_limbs`` off, or too few people with all limbs).
         lens: the lens chosen on held-out frames (:class:`~humancal.calibration.lens.LensChoice`; None for known
-            cameras used as given). ``per_view`` then has each view's ``k1``, ``k1_std`` (NaN: kept a pinhole), ``k2``, ``cx_px``,
-            ``cy_px``, ``cx_std_px`` and ``cy_std_px`` (NaN: kept at the centre).
+            cameras used as given). ``per_view`` then has each view's ``k1``, ``k1_std`` (NaN: kept a pinhole),
+            ``k2``, ``cx_px``, ``cy_px``, ``cx_std_px`` and ``cy_std_px`` (NaN: kept at the centre).
         timings_s: seconds per step.
     """
 
