@@ -42,6 +42,9 @@ class _Polyhedron:
 
     The free entries (between real detections of different views) of every row go, view by view, onto
     {y >= 0, sum y <= 1}; the diagonal is 1 and every other entry 0 (padding detections stay alone).
+
+    The row-view blocks are summed with one ``bincount`` over every entry's block (problem, row, column's view):
+    linear in the entries, where a product with a one-hot (n, V) matrix grows with the views too.
     """
 
     def __init__(self, view: np.ndarray, real: np.ndarray):
@@ -49,14 +52,12 @@ class _Polyhedron:
         self.n = view.shape[1]
         self.free = (local[:, :, None] != local[:, None, :]) & real[:, :, None] & real[:, None, :]
         self.per_view = per_view
-        if per_view > 1:
-            self.one_hot = (local[:, :, None] == np.arange(num_views)).astype(np.float64)  # (B, n, V)
+        self.local, self.num_views = local, num_views
 
     def subset(self, keep: np.ndarray) -> _Polyhedron:
         out = object.__new__(_Polyhedron)
-        out.n, out.per_view, out.free = self.n, self.per_view, self.free[keep]
-        if self.per_view > 1:
-            out.one_hot = self.one_hot[keep]
+        out.n, out.per_view, out.num_views = self.n, self.per_view, self.num_views
+        out.free, out.local = self.free[keep], self.local[keep]
         return out
 
     def __call__(self, z: np.ndarray) -> np.ndarray:
@@ -68,20 +69,32 @@ class _Polyhedron:
         y[:, idx, idx] = 1.0
         return y
 
+    def _block_of_entry(self) -> np.ndarray:
+        """(B * n * n,) int64 the row-view block of every entry: (problem * n + row) * V + the column's view."""
+        b, n = self.local.shape
+        rows = np.arange(b * n, dtype=np.int64).reshape(b, n, 1) * self.num_views
+        return (rows + self.local[:, None, :]).reshape(-1)
+
     def _cap_blocks(self, y: np.ndarray) -> np.ndarray:
         """Row-view blocks of nonnegative ``y`` summing to more than 1 go onto the simplex: y - theta clipped at 0,
-        theta found by Michelot's active-set iteration (exact after at most K rounds), all with matrix products."""
-        one_hot, one_hot_t = self.one_hot, self.one_hot.transpose(0, 2, 1)
-        over = (y @ one_hot) > 1.0  # (B, n, V)
+        theta found by Michelot's active-set iteration (exact after at most K rounds)."""
+        b, n, _ = y.shape
+        block = self._block_of_entry()
+        size = b * n * self.num_views
+
+        def block_sums(values: np.ndarray) -> np.ndarray:
+            return np.bincount(block, weights=values.reshape(-1), minlength=size)
+
+        over = block_sums(y) > 1.0  # (B * n * V,)
         if not over.any():
             return y
         active = y > 0.0
         theta = np.zeros_like(y)
         for _ in range(self.per_view):
-            count = active.astype(np.float64) @ one_hot
-            total = (y * active) @ one_hot
+            count = block_sums(active.astype(np.float64))
+            total = block_sums(y * active)
             theta_block = np.where(over, (total - 1.0) / np.maximum(count, 1.0), 0.0)
-            theta = theta_block @ one_hot_t
+            theta = theta_block[block].reshape(b, n, n)
             still = active & (y > theta)
             if (still == active).all():
                 break
@@ -108,6 +121,21 @@ def project_capped_simplex(y: np.ndarray) -> np.ndarray:
     theta = (np.take_along_axis(csum, (count - 1)[:, None], axis=-1)[:, 0] - 1.0) / count
     y[over] = np.maximum(y[over] - theta[:, None], 0.0)
     return y
+
+
+def _project_psd(m: np.ndarray) -> np.ndarray:
+    """(B, n, n) the nearest positive semidefinite matrices (Frobenius) to symmetric ``m``: the eigenvalues clipped
+    at 0. Rebuilt from whichever side of the spectrum has fewer eigenvalues over the batch (the positive part, or
+    ``m`` less its negative part): the solutions are of low rank, so this is usually a few columns."""
+    w, q = np.linalg.eigh(m)
+    n = m.shape[-1]
+    positive = int((w > 0.0).sum(axis=1).max(initial=0))
+    negative = int((w < 0.0).sum(axis=1).max(initial=0))
+    if positive <= negative:
+        q, w = q[:, :, n - positive:], np.maximum(w[:, n - positive:], 0.0)
+        return (q * w[:, None, :]) @ q.transpose(0, 2, 1)
+    q, w = q[:, :, :negative], np.minimum(w[:, :negative], 0.0)
+    return m - (q * w[:, None, :]) @ q.transpose(0, 2, 1)
 
 
 def solve_batch(gain: np.ndarray, view: np.ndarray, real: np.ndarray, start: np.ndarray, dual: np.ndarray, *, rho: float,
@@ -139,8 +167,7 @@ def solve_batch(gain: np.ndarray, view: np.ndarray, real: np.ndarray, start: np.
     active = np.arange(b)
     for it in range(1, max_iterations + 1):
         v = y - u
-        w, q = np.linalg.eigh(0.5 * (v + v.transpose(0, 2, 1)) + linear / rho_b)
-        x = (q * np.maximum(w, 0.0)[:, None, :]) @ q.transpose(0, 2, 1)
+        x = _project_psd(0.5 * (v + v.transpose(0, 2, 1)) + linear / rho_b)
         z = over_relaxation * x + (1.0 - over_relaxation) * y
         y_prev = y
         y = project(z + u)

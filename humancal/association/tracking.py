@@ -44,7 +44,7 @@ import pyarrow as pa
 
 from humancal.association.affinity import detection_track_affinity, pair_affinities
 from humancal.association.cluster_triangulation import cluster_observations
-from humancal.association.cycle_matching import match_frames
+from humancal.association.cycle_matching import WarmStart, match_frames
 from humancal.association.matched_clusters import MatchedClusters, TriangulationInputs, triangulate_matchings
 from humancal.association.track_smoothing import smooth_tracks
 from humancal.association.tracking_config import TrackingConfig
@@ -343,7 +343,9 @@ def _rematch_with_tracks(pairs, matrices, views, matchings, sk_frame, person, jo
             redo.append(i)
             redo_matrices.append(A)
     if redo:
-        again = match_frames([views[i] for i in redo], redo_matrices, config.matching_config)
+        # each frame starts from its own first solution (the same detections; the temporal term moves few pairs)
+        starts = [WarmStart(matchings[i].relaxed, matchings[i].dual) for i in redo]
+        again = match_frames([views[i] for i in redo], redo_matrices, config.matching_config, starts)
         for i, m in zip(redo, again):
             matchings[i] = m
     logger.debug("associate: the temporal term changed %d of %d frames", len(redo), len(pairs.frames))

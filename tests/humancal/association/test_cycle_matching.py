@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from humancal.association.cycle_admm import _Polyhedron, project_capped_simplex, round_batch
+from humancal.association.cycle_admm import _Polyhedron, _project_psd, project_capped_simplex, round_batch
 from humancal.association.cycle_matching import (
     FrameMatching,
     MatchingConfig,
@@ -223,10 +223,38 @@ def test_blockwise_projection_matches_reference():
             expected = 0.0 if v == view[0, a] else project_capped_simplex(z[0, a, cols][None])[0]
             np.testing.assert_allclose(y[0, a, cols[cols != a]], np.broadcast_to(expected, cols.shape)[cols != a],
                                        atol=1e-12)
+    # a batch of problems with their views in any order, one of them with a padding detection, and a subset of it
+    views = np.stack([rng.permutation(view[0]) for _ in range(3)])
+    real = np.ones((3, 8), bool)
+    real[1, 5] = False
+    z = rng.normal(0.4, 0.8, (3, 8, 8))
+    polyhedron = _Polyhedron(views, real)
+    for keep, out in ((np.ones(3, bool), polyhedron(z)), (np.array([False, True, True]),
+                                                          polyhedron.subset(np.array([False, True, True]))(z[1:]))):
+        for p, problem in enumerate(np.flatnonzero(keep)):
+            for a in range(8):
+                for v in range(4):
+                    cols = np.flatnonzero((views[problem] == v) & real[problem] & (np.arange(8) != a))
+                    if v == views[problem, a] or not real[problem, a]:
+                        np.testing.assert_array_equal(out[p, a, cols], 0.0)
+                    else:
+                        np.testing.assert_allclose(out[p, a, cols], project_capped_simplex(z[problem, a, cols][None])[0],
+                                                   atol=1e-12)
     # The reference is a projection: the residual makes an obtuse angle with every feasible direction.
     p = project_capped_simplex(z[0, :, :4])
     for q in rng.dirichlet(np.ones(5), 200)[:, :4]:
         assert (((z[0, :, :4] - p) * (q - p)).sum(axis=1) <= 1e-9).all()
+
+
+@pytest.mark.parametrize("shift", [-0.5, 0.5])  # mostly negative eigenvalues, mostly positive ones
+def test_psd_projection_clips_the_eigenvalues_from_either_side(shift):
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(4, 12, 12))
+    m = 0.5 * (a + a.transpose(0, 2, 1)) / 3.0 + shift * np.eye(12)
+    w, q = np.linalg.eigh(m)
+    assert ((w > 0).any(axis=1) & (w < 0).any(axis=1)).all()  # both sides in every matrix: not trivial
+    expected = (q * np.maximum(w, 0.0)[:, None, :]) @ q.transpose(0, 2, 1)
+    np.testing.assert_allclose(_project_psd(m), expected, atol=1e-12)
 
 
 # ----------------------------------------------------------------------------------------------------- edge cases
