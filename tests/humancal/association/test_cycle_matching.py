@@ -238,8 +238,8 @@ def test_blockwise_projection_matches_reference():
                     if v == views[problem, a] or not real[problem, a]:
                         np.testing.assert_array_equal(out[p, a, cols], 0.0)
                     else:
-                        np.testing.assert_allclose(out[p, a, cols], project_capped_simplex(z[problem, a, cols][None])[0],
-                                                   atol=1e-12)
+                        expected = project_capped_simplex(z[problem, a, cols][None])[0]
+                        np.testing.assert_allclose(out[p, a, cols], expected, atol=1e-12)
     # The reference is a projection: the residual makes an obtuse angle with every feasible direction.
     p = project_capped_simplex(z[0, :, :4])
     for q in rng.dirichlet(np.ones(5), 200)[:, :4]:
