@@ -53,11 +53,12 @@ class _Polyhedron:
         self.free = (local[:, :, None] != local[:, None, :]) & real[:, :, None] & real[:, None, :]
         self.per_view = per_view
         self.local, self.num_views = local, num_views
+        self._blocks: np.ndarray | None = None
 
     def subset(self, keep: np.ndarray) -> _Polyhedron:
         out = object.__new__(_Polyhedron)
         out.n, out.per_view, out.num_views = self.n, self.per_view, self.num_views
-        out.free, out.local = self.free[keep], self.local[keep]
+        out.free, out.local, out._blocks = self.free[keep], self.local[keep], None
         return out
 
     def __call__(self, z: np.ndarray) -> np.ndarray:
@@ -70,10 +71,13 @@ class _Polyhedron:
         return y
 
     def _block_of_entry(self) -> np.ndarray:
-        """(B * n * n,) int64 the row-view block of every entry: (problem * n + row) * V + the column's view."""
-        b, n = self.local.shape
-        rows = np.arange(b * n, dtype=np.int64).reshape(b, n, 1) * self.num_views
-        return (rows + self.local[:, None, :]).reshape(-1)
+        """(B * n * n,) int64 the row-view block of every entry: (problem * n + row) * V + the column's view
+        (computed once per batch of problems)."""
+        if self._blocks is None:
+            b, n = self.local.shape
+            rows = np.arange(b * n, dtype=np.int64).reshape(b, n, 1) * self.num_views
+            self._blocks = (rows + self.local[:, None, :]).reshape(-1)
+        return self._blocks
 
     def _cap_blocks(self, y: np.ndarray) -> np.ndarray:
         """Row-view blocks of nonnegative ``y`` summing to more than 1 go onto the simplex: y - theta clipped at 0,
