@@ -1,5 +1,5 @@
 """Run time and accuracy of the whole association (affinity, matching, tracking, triangulation) on the benchmark
-workload: 900 frames, 5 views, 4 people.
+workload: 900 frames, 5 views, 4 people (or another size of the same scene: ``--views``, ``--people``, ``--frames``).
 
 Builds the synthetic ``benchmark`` scene (with its false positives and left-right flips), lifts every detection with
 the shipped lifter into the ground-truth cameras' frames (not timed as association), then runs
@@ -7,7 +7,8 @@ the shipped lifter into the ground-truth cameras' frames (not timed as associati
 seconds of the fastest run and, against the true identities: pairwise precision and recall of same-person
 detection pairs across views, identity switches, false positives rejected and the number of people.
 
-    python scripts/bench_association.py [--repeats 3] [--threads 2] [--match-threshold 0.3] [--no-temporal]
+    python scripts/bench_association.py [--repeats 3] [--threads 2] [--match-threshold 0.3] [--no-temporal] \
+        [--views 31 --people 8 --frames 60]
 """
 
 from __future__ import annotations
@@ -58,11 +59,16 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--match-threshold", type=float, default=TrackingConfig().match_threshold)
     parser.add_argument("--no-temporal", action="store_true", help="without the temporal term")
+    parser.add_argument("--views", type=int, default=None, help="cameras (default: the benchmark scene's 5)")
+    parser.add_argument("--people", type=int, default=None, help="people (default: the benchmark scene's 4)")
+    parser.add_argument("--frames", type=int, default=None, help="frames (default: the benchmark scene's 900)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     config = TrackingConfig(match_threshold=args.match_threshold, temporal=not args.no_temporal)
     with threadpoolctl.threadpool_limits(args.threads):
-        scene = generate_scene(preset("benchmark"), BodyModel(), sequence="benchmark")
+        sizes = {"num_views": args.views, "num_people": args.people, "num_frames": args.frames}
+        scene = generate_scene(preset("benchmark", **{k: v for k, v in sizes.items() if v is not None}), BodyModel(),
+                               sequence="benchmark")
         dense = detections_to_dense(scene.detections)
         truth = Associations.from_table(scene.associations).person_of_detections(dense)
         rig = CameraRig.from_cameras(scene.rig)
