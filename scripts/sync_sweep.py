@@ -15,6 +15,8 @@ frames and the fraction) with :func:`humancal.sync.check_offsets_with_cameras`; 
 are unsure of, is counted as refused (``add`` stops on it), an ``unchecked`` or tentative one they confirm (it
 agrees, or moved inside the search) as used. Scenes with fewer than 3 such views are left as the estimate gave them.
 ``--no-tentative`` leaves ambiguous views out of the check, as ``add`` did before (the figures at 6ab35cb).
+Where views disagree with the cameras, groups of views placed a period of the people's motion off are searched for
+and checked again (:func:`humancal.sync.capture.check_and_regroup`); ``--no-regroup`` does not.
 
 ``--clocks consumer`` draws phone rigs instead (the ``phone`` preset: lens distortion, principal points off centre,
 portrait images), each view filming at 25, 30, 50 or 60 fps, started up to 2 s apart, for 5-15 s; offsets are then
@@ -86,7 +88,7 @@ def _consumer_scene(seed: int, body, noise=None):
 
 
 def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str = "studio", tentative: bool = True,
-              signal: str = "lifted", check_interpolate: bool = True) -> dict:
+              signal: str = "lifted", check_interpolate: bool = True, regroup: bool = True) -> dict:
     from humancal.sync import SyncConfig, estimate_time_offsets
 
     scene, detections, fps, truth_s, row = (_consumer_scene if clocks == "consumer" else _studio_scene)(seed, body)
@@ -97,7 +99,7 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
     offsets, used = estimate.offset_frames, np.array([s == "ok" for s in estimate.status])
     if with_cameras:
         offsets, used, checked = _checked_with_cameras(detections, estimate, scene.rig, lifter, tentative,
-                                                       check_interpolate)
+                                                       check_interpolate, regroup)
         row |= checked
     used = used[1:]
     error = (offsets - truth)[1:]
@@ -113,16 +115,17 @@ def run_scene(seed: int, body, lifter, with_cameras: bool = False, clocks: str =
                   "seconds": round(seconds, 2)}
 
 
-def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True, interpolate=True
+def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True, interpolate=True, regroup=True
                           ) -> tuple[np.ndarray, np.ndarray, dict]:
     """What ``humancal add --unsynced`` does after the estimate (``humancal.sync.capture.synchronise_views``): the
     views with an offset (``ok``, ``unchecked``, tentative) put on one clock, calibrated from the people and each
-    offset checked and moved (:func:`humancal.sync.capture.calibrate_and_check`). Returns the offsets (reference frames;
+    offset checked and moved, views placed a period of the motion off regrouped where views disagree
+    (:func:`humancal.sync.capture.check_and_regroup`). Returns the offsets (reference frames;
     NaN for a view the cameras disagree with), which views are used (``ok`` and neither disagreeing nor unsure, or
     ``unchecked`` or tentative and confirmed: the check agrees or moved it inside the search), and what the check
     did."""
-    from humancal.sync import tentative_offsets_s
-    from humancal.sync.capture import calibrate_and_check
+    from humancal.sync import misplaced_period_s, tentative_offsets_s
+    from humancal.sync.capture import check_and_regroup
 
     start = time.perf_counter()
     status = np.array(estimate.status)
@@ -135,11 +138,14 @@ def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True, int
     kept = detections[detections["view"].isin(placed)].copy()
     kept["view"] = kept["view"].map({v: i for i, v in enumerate(placed)})
     sizes = [(rig[v].width_px, rig[v].height_px) for v in placed]
+    period_s = misplaced_period_s(estimate, offset_s) if regroup else None
     try:
-        check = calibrate_and_check(kept, offset_s[placed], estimate.fps[placed], sizes, lifter,
+        checked = check_and_regroup(kept, offset_s[placed], estimate.fps[placed], sizes, lifter, period_s,
                                     interpolate=interpolate)
     except Exception as error:  # noqa: BLE001 - the sweep records why a scene could not be checked
         return offsets, used, {"camera_check": f"{type(error).__name__}: {error}"}
+    check = checked.check
+    offsets[placed] = checked.offset_s * estimate.fps[0]
     verdict = np.array(check.status)
     refused = np.isin(verdict, ("disagrees", "unsure"))
     offsets[placed] = np.where(verdict == "disagrees", np.nan, offsets[placed] - check.shift)
@@ -152,6 +158,10 @@ def _checked_with_cameras(detections, estimate, rig, lifter, tentative=True, int
                            "check_status": list(check.status), "check_gain": [round(float(g), 3) for g in check.gain],
                            "check_level_m": [round(float(x), 4) for x in check.level_m],
                            "confirmed_unchecked": int((confirmed & (status[placed] == "unchecked")).sum()),
+                           "period_s": None if period_s is None else round(period_s, 4),
+                           "period_moved": [] if checked.period_search is None
+                           else [int(k) for k in checked.period_search.shift_periods],
+                           "regrouped": checked.regrouped,
                            "check_s": round(time.perf_counter() - start, 2)}
 
 
@@ -173,6 +183,9 @@ def main() -> None:
     parser.add_argument("--check-nearest", dest="check_interpolate", action="store_false",
                         help="with --with-cameras: the check takes each view's nearest frames, not its people "
                              "interpolated at view 0's frame times (as before 2026-11-29)")
+    parser.add_argument("--no-regroup", dest="regroup", action="store_false",
+                        help="with --with-cameras: no search for views placed a period of the motion off when views "
+                             "disagree with the cameras (as before 2026-11-30)")
     parser.add_argument("--signal", choices=("lifted", "2d", "both"), default="lifted",
                         help="the pose signal the offsets are estimated from (SyncConfig.signal)")
     args = parser.parse_args()
@@ -197,7 +210,7 @@ def main() -> None:
                           else shipped_checkpoint())
             body, lifter = BodyModel(), load_lifter(checkpoint)
         row = run_scene(seed, body, lifter, args.with_cameras, args.clocks, args.tentative, args.signal,
-                        args.check_interpolate)
+                        args.check_interpolate, args.regroup)
         done[seed] = row
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")

@@ -20,6 +20,7 @@ from humancal.sync.offsets import (
     per_view_fps,
     tentative_offsets_s,
 )
+from humancal.sync.periods import PeriodConfig, PeriodSearch, misplaced_period_s, regroup_by_period
 from humancal.sync.with_cameras import CameraCheck, CameraCheckConfig, check_offsets_with_cameras
 from humancal.sync.signals import SIGNAL_KINDS, TrackSignals, track_signals
 from humancal.sync.tracks import link_view_tracks
@@ -32,6 +33,8 @@ __all__ = [
     "CameraCheckConfig",
     "TrackSignals",
     "PairOffset",
+    "PeriodConfig",
+    "PeriodSearch",
     "SyncConfig",
     "TimeOffsets",
     "ViewAtTimes",
@@ -39,6 +42,8 @@ __all__ = [
     "check_offsets_with_cameras",
     "estimate_time_offsets",
     "link_view_tracks",
+    "misplaced_period_s",
+    "regroup_by_period",
     "track_signals",
     "per_view_fps",
     "tentative_offsets_s",

@@ -12,9 +12,11 @@ import pandas as pd
 
 from humancal.sync.apply import apply_time_offsets
 from humancal.sync.offsets import SyncConfig, TimeOffsets, estimate_time_offsets, tentative_offsets_s
+from humancal.sync.periods import PeriodSearch, misplaced_period_s, regroup_by_period
 from humancal.sync.with_cameras import CameraCheck, check_offsets_with_cameras
 
-__all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "calibrate_and_check", "synchronise_views"]
+__all__ = ["DEFAULT_SYNC_FPS", "CaptureSync", "OffsetCheck", "calibrate_and_check", "check_and_regroup",
+           "synchronise_views"]
 
 log = logging.getLogger(__name__)
 
@@ -165,7 +167,8 @@ def synchronise_views(detections: pd.DataFrame, names: Sequence[str], *, fps: fl
         source, status, confidence = "estimated", estimate.status, estimate.confidence
         if image_sizes_px is not None:
             offsets, camera_check, check = _checked_with_cameras(detections, offsets, rates, names, image_sizes_px,
-                                                                 lifter, option_names, interpolate)
+                                                                 lifter, option_names, interpolate,
+                                                                 misplaced_period_s(estimate, offsets))
             confirmed = [v for v in unchecked + tentative if check is not None and check.confirms(v)]
             _refuse_unusable(estimate, names, option_names, config, sorted(set(unchecked) - set(confirmed)),
                              ambiguous=sorted(set(tentative) - set(confirmed)), cameras_tried=True)
@@ -221,10 +224,75 @@ def calibrate_and_check(detections: pd.DataFrame, offsets_s: np.ndarray, rates: 
                                       camera_verdicts=calibrated.diagnostics.per_view["agreement"].tolist())
 
 
+@dataclass(frozen=True)
+class OffsetCheck:
+    """What :func:`check_and_regroup` did.
+
+    Attributes:
+        offset_s: (V,) the offsets the check judged, seconds: as given, or moved by whole periods of the people's
+            motion (``regrouped``).
+        check: the check of those offsets against cameras calibrated on them.
+        period_search: the search for views placed a period off (:func:`humancal.sync.periods.regroup_by_period`;
+            None: it did not run, no view disagreeing or no period to search).
+        regrouped: whether the offsets it moved were checked and kept (fewer views disagree than before).
+        first_check: the check of the offsets as given, when they were regrouped (None otherwise).
+    """
+
+    offset_s: np.ndarray
+    check: CameraCheck
+    period_search: PeriodSearch | None = None
+    regrouped: bool = False
+    first_check: CameraCheck | None = None
+
+
+def check_and_regroup(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray,
+                      image_sizes_px: Sequence[tuple[int, int]], lifter, period_s: float | None,
+                      view_names: Sequence[str] | None = None, interpolate: bool = True) -> OffsetCheck:
+    """:func:`calibrate_and_check`; where views disagree with the cameras and some pairs of views disagree with the
+    offsets by about a period of the people's motion (``period_s``, :func:`humancal.sync.misplaced_period_s`), the
+    views are moved by whole periods where the pairs' epipolar geometry supports them best
+    (:func:`humancal.sync.periods.regroup_by_period`: a group of views a gait cycle off together) and checked again
+    on cameras calibrated on the new clock; the new offsets are kept when fewer views disagree.
+
+    Args:
+        detections, offsets_s, rates, image_sizes_px, lifter, view_names, interpolate: as :func:`calibrate_and_check`.
+        period_s: the period to search, seconds (None: no search).
+
+    Raises:
+        CalibrationError: the first calibration failed (a failure of the second keeps the first check).
+    """
+    from humancal.calibration import CalibrationError
+
+    check = calibrate_and_check(detections, offsets_s, rates, image_sizes_px, lifter, view_names, interpolate)
+    disagreeing = check.status.count("disagrees")
+    if period_s is None or not disagreeing:
+        return OffsetCheck(offsets_s, check)
+    log.info("%d views disagree with the cameras; searching for views placed %.2f s (a period of the people's "
+             "motion) off ...", disagreeing, period_s)
+    search = regroup_by_period(detections, offsets_s, rates, period_s)
+    if not search.moved:
+        log.info("no group of views is better supported a period away")
+        return OffsetCheck(offsets_s, check, search)
+    log.info("views %s moved by %s periods; checking them against cameras calibrated on that clock ...",
+             search.moved, search.shift_periods[search.moved].tolist())
+    try:
+        second = calibrate_and_check(detections, search.offset_s, rates, image_sizes_px, lifter, view_names,
+                                     interpolate)
+    except CalibrationError as error:
+        log.warning("the calibration on the regrouped offsets failed (%s): the first check stands", error)
+        return OffsetCheck(offsets_s, check, search)
+    if second.status.count("disagrees") >= disagreeing:
+        log.info("the regrouped offsets do no better (%d views disagree): the first check stands",
+                 second.status.count("disagrees"))
+        return OffsetCheck(offsets_s, check, search)
+    return OffsetCheck(search.offset_s, second, search, regrouped=True, first_check=check)
+
+
 def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np.ndarray, names: Sequence[str],
                           image_sizes_px: Sequence[tuple[int, int]], lifter, option_names: Mapping[str, str],
-                          interpolate: bool = True) -> tuple[np.ndarray, tuple[str, ...], CameraCheck | None]:
-    """The estimated offsets after :func:`calibrate_and_check`, what it did per view (the words of
+                          interpolate: bool = True, period_s: float | None = None
+                          ) -> tuple[np.ndarray, tuple[str, ...], CameraCheck | None]:
+    """The estimated offsets after :func:`check_and_regroup`, what it did per view (the words of
     :attr:`CaptureSync.camera_check`) and the check (None: the calibration failed).
 
     Raises:
@@ -234,20 +302,28 @@ def _checked_with_cameras(detections: pd.DataFrame, offsets_s: np.ndarray, rates
 
     log.info("checking the time offsets against cameras calibrated from the people ...")
     try:
-        check = calibrate_and_check(detections, offsets_s, rates, image_sizes_px, lifter, names, interpolate)
+        checked = check_and_regroup(detections, offsets_s, rates, image_sizes_px, lifter, period_s, names,
+                                    interpolate)
     except CalibrationError as error:
         log.warning("the time offsets were not checked against cameras: the calibration failed (%s)", error)
         return offsets_s, (f"not checked ({type(error).__name__})",) * len(names), None
+    check, offsets_s = checked.check, checked.offset_s
     _refuse_disagreeing(check, offsets_s, names, option_names, float(rates[0]))
-    words = tuple(_check_words(check, v) for v in range(len(names)))
+    words = tuple(_check_words(check, v, checked) for v in range(len(names)))
     return check.corrected_offsets_s(offsets_s, rates[0]), words, check
 
 
-def _check_words(check: CameraCheck, v: int) -> str:
+def _check_words(check: CameraCheck, v: int, checked: OffsetCheck | None = None) -> str:
     move = -float(check.shift[v])
     if check.status[v] == "moved":
-        return f"moved {move:+.2f} frames"
-    return check.status[v] + (f" ({move:+.2f} frame)" if round(move, 2) else "")
+        words = f"moved {move:+.2f} frames"
+    else:
+        words = check.status[v] + (f" ({move:+.2f} frame)" if round(move, 2) else "")
+    if checked is not None and checked.regrouped and checked.period_search.shift_periods[v]:
+        search = checked.period_search
+        words += (f", after a move of {search.shift_periods[v] * search.period_s:+.3f} s (a period of the people's "
+                  f"motion) that the pairs of views' epipolar geometry supports")
+    return words
 
 
 def _refuse_disagreeing(check: CameraCheck, offsets_s: np.ndarray, names: Sequence[str],

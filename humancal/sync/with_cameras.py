@@ -33,7 +33,8 @@ How (:func:`check_offsets_with_cameras`):
    no shift within the search mends them, and they must not be used. A view whose camera the calibration itself
    says disagrees with the others (``camera_verdicts``) disagrees too: on phone rigs filming at mixed frame rates
    (``scripts/sync_sweep.py --clocks consumer``) six of ten views were placed a gait cycle off together, the
-   calibration built itself around them and judged every camera disagreeing, while their levels looked fine;
+   calibration built itself around them and judged every camera disagreeing, while their levels looked fine
+   (:func:`humancal.sync.capture.check_and_regroup` then looks for such a group, :mod:`humancal.sync.periods`);
 6. the fraction of a frame beyond each whole shift (``sub_frame``): a camera started by hand starts between two of
    view 0's frames, and at another frame rate its frames fall anywhere between view 0's. Every pair of views whose
    cost is lowest at its relative shift ``d`` gives the vertex of the parabola through its costs at ``d - 1, d,

@@ -529,6 +529,7 @@ def _assert_close_to_truth(estimated, truth, label: str, capsys) -> dict:
     return figures
 
 
+@pytest.mark.slow  # about a minute; .ci/run runs it
 def test_openpose_capture_end_to_end_matches_the_synthetic_truth(tmp_path, state, monkeypatch, capsys, body_model):
     folders, _, truth = _write_synthetic_capture(tmp_path / "capture", body_model, num_frames=48, footage_every=16)
     # A known principal point half a pixel off the centre (the truth's): small enough not to matter, and it must
