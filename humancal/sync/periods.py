@@ -200,8 +200,8 @@ def regroup_by_period(detections: pd.DataFrame, offsets_s: np.ndarray, rates: np
                                                        rates).detections)
         tables[int(d)] = (dense, [np.flatnonzero(dense.view == v) for v in range(V)])
     support = np.full((V, V, len(SHIFTS)), np.nan)
+    dense_a, rows_a = tables[0]  # view a at its offset, view b at its offset plus d periods
     for a, b in itertools.combinations(range(V), 2):
-        dense_a, rows_a = tables[0]
         for i, d in enumerate(SHIFTS):
             dense_b, rows_b = tables[int(d)]
             support[a, b, i] = pair_support(dense_a, rows_a[a], dense_b, rows_b[b], config)
